@@ -1,0 +1,105 @@
+"""The ``ulnef`` command line: ``serve``, ``garments``, ``openapi``."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+import yaml
+
+from service.app import CATALOG_NOT_LOADED, create_app, try_load_catalog
+from service.settings import Settings
+
+TABLE_COLUMNS = (
+    ("id", "id"),
+    ("name", "name"),
+    ("category", "category"),
+    ("layer rank", "layer_rank"),
+    ("vertices", "vertices"),
+    ("faces", "faces"),
+    ("openings", "openings"),
+)
+
+
+class _NoAliasDumper(yaml.SafeDumper):
+    """Writes shared sub-objects out in full instead of as YAML anchors, so the file reads plainly."""
+
+    def ignore_aliases(self, data) -> bool:
+        return True
+
+
+def render_openapi() -> str:
+    """The app's OpenAPI schema as YAML, keys in FastAPI's order (stable across runs)."""
+    schema = create_app(Settings()).openapi()
+    return yaml.dump(schema, Dumper=_NoAliasDumper, sort_keys=False, allow_unicode=True, width=100)
+
+
+def format_table(rows: list[dict]) -> str:
+    """Left-aligned text table of garment summaries (``Garment.summary()`` dicts)."""
+    cells = [[h for h, _ in TABLE_COLUMNS]]
+    for row in rows:
+        values = (row[key] for _, key in TABLE_COLUMNS)
+        cells.append([", ".join(v) if isinstance(v, list) else str(v) for v in values])
+    widths = [max(len(r[i]) for r in cells) for i in range(len(TABLE_COLUMNS))]
+    return "\n".join("  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)).rstrip() for r in cells)
+
+
+def cmd_serve(args: argparse.Namespace) -> int:
+    import uvicorn
+
+    settings = Settings(host=args.host, port=args.port)
+    logging.basicConfig(level=settings.log_level.upper(), format="%(levelname)s:     %(name)s: %(message)s")
+    uvicorn.run(create_app(settings), host=settings.host, port=settings.port, log_level=settings.log_level)
+    return 0
+
+
+def cmd_garments(args: argparse.Namespace) -> int:
+    catalog = try_load_catalog(Settings())
+    if catalog is None:
+        print(f"ulnef: {CATALOG_NOT_LOADED} (set ULNEF_MODELS_DIR or build models/garments)", file=sys.stderr)
+        return 1
+    rows = [g.summary() for g in catalog.values()]
+    print(json.dumps({"garments": rows}, indent=2) if args.json else format_table(rows))
+    return 0
+
+
+def cmd_openapi(args: argparse.Namespace) -> int:
+    text = render_openapi()
+    if args.output == "-":
+        sys.stdout.write(text)
+    else:
+        Path(args.output).write_text(text)
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    defaults = Settings()
+    parser = argparse.ArgumentParser(prog="ulnef", description="ULNeF virtual try-on service.")
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    serve = sub.add_parser("serve", help="run the HTTP service on the bundled models")
+    serve.add_argument("--host", default=defaults.host, help="bind address (default: %(default)s)")
+    serve.add_argument("--port", type=int, default=defaults.port, help="port (default: %(default)s)")
+    serve.set_defaults(func=cmd_serve)
+
+    garments = sub.add_parser("garments", help="list the garment catalog")
+    garments.add_argument("--json", action="store_true", help="print JSON, as GET /v1/garments answers")
+    garments.set_defaults(func=cmd_garments)
+
+    openapi = sub.add_parser("openapi", help="write the HTTP API's OpenAPI schema as YAML")
+    openapi.add_argument("-o", "--output", default="-", help="output file, '-' for stdout (default: stdout)")
+    openapi.set_defaults(func=cmd_openapi)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    return args.func(args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,62 @@
+"""Shared fixtures: a tiny garment catalog on disk, and no catalog cache shared between tests."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from service.catalog import Garment, load_catalog, save_garment
+
+
+@pytest.fixture(autouse=True)
+def _fresh_catalog_cache():
+    """``load_catalog`` is lru_cached by directory; a catalog read by one test must not leak into the next."""
+    load_catalog.cache_clear()
+    yield
+    load_catalog.cache_clear()
+
+
+def tiny_garments() -> list[Garment]:
+    """Two garments small enough to check by hand: a quad with two openings and a single triangle."""
+    quad = Garment(
+        id="tshirt",
+        name="T-shirt",
+        category="top",
+        layer_rank=1,
+        vertices=np.array([[0, 0, 0], [1, 0, 0], [1, 0, 1], [0, 0, 1]], dtype=np.float64),
+        faces=np.array([[0, 1, 2], [0, 2, 3]], dtype=np.int64),
+        openings={"waist": np.array([0, 1]), "neck": np.array([2, 3])},
+    )
+    triangle = Garment(
+        id="pants",
+        name="Pants",
+        category="bottom",
+        layer_rank=0,
+        vertices=np.array([[0, 0, 0], [1, 0, 0], [0, 0, 1]], dtype=np.float64),
+        faces=np.array([[0, 1, 2]], dtype=np.int64),
+        openings={"waist": np.array([0, 1, 2])},
+    )
+    return [quad, triangle]
+
+
+@pytest.fixture
+def fake_models_dir(tmp_path: Path) -> Path:
+    """A models directory whose ``garments/`` holds the catalog of ``tiny_garments()``."""
+    directory = tmp_path / "models" / "garments"
+    entries = []
+    for garment in tiny_garments():
+        path = save_garment(directory, garment)
+        entries.append(
+            {
+                "id": garment.id,
+                "name": garment.name,
+                "category": garment.category,
+                "layer_rank": garment.layer_rank,
+                "file": path.name,
+            }
+        )
+    (directory / "catalog.json").write_text(json.dumps({"garments": entries}, indent=2))
+    return directory.parent
