@@ -9,7 +9,7 @@ PIP_INSTALL := PIP_DISABLE_PIP_VERSION_CHECK=1 $(PIP) install -q
 # wheel (pip find-links) is what satisfies anny's torch requirement, not the CUDA build.
 TORCH_PIN := $(shell grep -o '"torch==[^"]*"' pyproject.toml | tr -d '"')
 
-.PHONY: serve test lint clean distclean
+.PHONY: serve test lint models pictures clean distclean
 
 serve: $(VENV)/.installed-serve
 	$(BIN)/ulnef serve
@@ -17,6 +17,15 @@ serve: $(VENV)/.installed-serve
 test: $(VENV)/.installed-test
 	$(BIN)/ruff check .
 	$(BIN)/pytest
+
+# Rebuild every committed model from scratch (body basis, garment catalog), then the manifest.
+models: $(VENV)/.installed-test
+	$(BIN)/python -m export.body
+	$(BIN)/python -m training.garments
+	$(BIN)/python -m export.manifest
+
+pictures: $(VENV)/.installed-test
+	$(BIN)/python -m training.pictures
 
 lint: $(VENV)/.installed-dev
 	$(BIN)/ruff check .

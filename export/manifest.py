@@ -72,7 +72,7 @@ def write_manifest(models_dir: Path) -> Path:
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument(
-        "--models-dir", type=Path, default=None, help="models directory (default: ULNEF_MODELS_DIR or models/)"
+        "--models-dir", type=Path, default=None, help="default: ULNEF_MODELS_DIR, else models/"
     )
     args = parser.parse_args(argv)
     directory = args.models_dir if args.models_dir is not None else default_models_dir()

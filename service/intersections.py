@@ -42,6 +42,8 @@ def triangles_intersect(ta: np.ndarray, tb: np.ndarray) -> np.ndarray:
 
 def candidate_pairs(va, fa, vb, fb) -> np.ndarray:
     """Triangle index pairs ``(P, 2)`` (into fa, fb) whose bounding boxes overlap."""
+    if len(fa) == 0 or len(fb) == 0:
+        return np.zeros((0, 2), dtype=np.int64)
     ta, tb = va[fa], vb[fb]
     ca, cb = ta.mean(axis=1), tb.mean(axis=1)
     ra = np.linalg.norm(ta - ca[:, None], axis=2).max(axis=1)

@@ -86,6 +86,8 @@ def boundary_loops(faces: np.ndarray) -> list[np.ndarray]:
         while v not in seen:
             seen.add(v)
             loop.append(v)
+            if v not in nxt:
+                raise ValueError(f"open boundary chain at vertex {v}")
             v = nxt[v]
         if v != start:
             raise ValueError(f"open boundary chain at vertex {start}")

@@ -85,6 +85,10 @@ def remesh(vertices: np.ndarray, faces: np.ndarray, target: float, iterations: i
         targetlen=pymeshlab.PureValue(target), iterations=iterations, featuredeg=60.0,
         maxsurfdist=pymeshlab.PureValue(target * 0.1),
     )
+    # The remesher keeps the cut's boundary vertices, which can leave a few sub-mm boundary edges
+    # (slivers that would stiffen a cloth simulation): merge vertices closer than a third of target.
+    ms.meshing_merge_close_vertices(threshold=pymeshlab.PureValue(target / 3))
+    ms.meshing_remove_duplicate_faces()
     m = ms.current_mesh()
     return compact(m.vertex_matrix().astype(np.float64), m.face_matrix().astype(np.int64))
 

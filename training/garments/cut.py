@@ -16,14 +16,14 @@ def clip_mesh(vertices: np.ndarray, faces: np.ndarray, values: np.ndarray, eps: 
 
     vertices: (V, 3) float; faces: (F, 3) int; values: (V,) float.
     Returns (vertices (V', 3), faces (F', 3)) with new vertices on crossing edges; unused
-    vertices are dropped. Values within eps of 0 are pushed off zero so that no vertex
-    sits exactly on the cut (which would leave slivers).
+    vertices are dropped. Values within eps of 0 snap to 0: such a vertex is kept and is itself
+    the crossing point of its edges, so a cut through vertices leaves no slivers.
     """
     check_mesh(vertices, faces)
     values = np.asarray(values, dtype=np.float64)
     if values.shape != (len(vertices),):
         raise ValueError(f"values must be ({len(vertices)},), got {values.shape}")
-    values = np.where(np.abs(values) < eps, eps, values)
+    values = np.where(np.abs(values) < eps, 0.0, values)
     inside = values <= 0
     new_vertices = [vertices]
     edge_vertex: dict[tuple[int, int], int] = {}
@@ -31,6 +31,10 @@ def clip_mesh(vertices: np.ndarray, faces: np.ndarray, values: np.ndarray, eps: 
 
     def crossing(a: int, b: int) -> int:
         nonlocal count
+        if values[a] == 0.0:
+            return a
+        if values[b] == 0.0:
+            return b
         key = (a, b) if a < b else (b, a)
         if key not in edge_vertex:
             t = values[key[0]] / (values[key[0]] - values[key[1]])
@@ -56,7 +60,10 @@ def clip_mesh(vertices: np.ndarray, faces: np.ndarray, values: np.ndarray, eps: 
     if extra:
         out_faces.append(np.array(extra, dtype=faces.dtype))
     all_vertices = np.concatenate([np.atleast_2d(x) for x in new_vertices])
-    return compact(all_vertices, np.concatenate(out_faces))
+    out = np.concatenate(out_faces)
+    # a triangle with a vertex on the cut can collapse to a repeated index: it had no area
+    degenerate = (out[:, 0] == out[:, 1]) | (out[:, 1] == out[:, 2]) | (out[:, 2] == out[:, 0])
+    return compact(all_vertices, out[~degenerate])
 
 
 def compact(vertices: np.ndarray, faces: np.ndarray):
