@@ -8,6 +8,7 @@ import pytest
 import trimesh
 
 from service.mesh import boundary_loops, face_normals, is_edge_manifold
+from tests.meshes import grid_mesh
 from training.garments.cut import clip_mesh, compact, largest_component
 
 # Cut lines that pass through no vertex of grid_mesh(7): its coordinates are k / 7.
@@ -17,15 +18,6 @@ PLANES = [  # (a, b, c): values = a x + b y - c on the unit square; kept area {v
     ((-1.0, 0.0, -0.3), 0.7),  # x >= 0.3
     ((1.0, 1.0, 0.5), 0.125),  # the corner triangle x + y <= 0.5
 ]
-
-
-def grid_mesh(n: int) -> tuple[np.ndarray, np.ndarray]:
-    """Unit square in z = 0 split into n x n quads, two triangles each, normals +z."""
-    x, y = np.meshgrid(np.linspace(0, 1, n + 1), np.linspace(0, 1, n + 1), indexing="ij")
-    vertices = np.stack([x.ravel(), y.ravel(), np.zeros(x.size)], axis=1)
-    idx = np.arange(x.size).reshape(n + 1, n + 1)
-    a, b, c, d = idx[:-1, :-1].ravel(), idx[1:, :-1].ravel(), idx[1:, 1:].ravel(), idx[:-1, 1:].ravel()
-    return vertices, np.concatenate([np.stack([a, b, c], axis=1), np.stack([a, c, d], axis=1)])
 
 
 def areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:

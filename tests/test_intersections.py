@@ -13,18 +13,10 @@ from service.intersections import (
     segments_cross_triangles,
     triangles_intersect,
 )
+from tests.meshes import grid_mesh
 
 FLAT = np.array([[-1.0, -1.0, 0.0], [1.0, -1.0, 0.0], [0.0, 1.0, 0.0]])  # in z = 0
 ONE_FACE = np.array([[0, 1, 2]])
-
-
-def grid_mesh(n: int) -> tuple[np.ndarray, np.ndarray]:
-    """Unit square in z = 0 split into n x n quads, two triangles each."""
-    x, y = np.meshgrid(np.linspace(0, 1, n + 1), np.linspace(0, 1, n + 1), indexing="ij")
-    vertices = np.stack([x.ravel(), y.ravel(), np.zeros(x.size)], axis=1)
-    idx = np.arange(x.size).reshape(n + 1, n + 1)
-    a, b, c, d = idx[:-1, :-1].ravel(), idx[1:, :-1].ravel(), idx[1:, 1:].ravel(), idx[:-1, 1:].ravel()
-    return vertices, np.concatenate([np.stack([a, b, c], axis=1), np.stack([a, c, d], axis=1)])
 
 
 def figure_eight_strip(n: int = 47) -> tuple[np.ndarray, np.ndarray]:

@@ -151,18 +151,25 @@ def push_out(vertices: np.ndarray, distance: SurfaceDistance, clearance: float) 
     return v
 
 
+def finish_surface(vertices, faces, smooth_iterations: int, distance: SurfaceDistance):
+    """Remesh, smooth with the openings fixed, and keep clear of the body.
+
+    Returns (vertices, faces, boundary loops)."""
+    v, f = remesh(vertices, faces, TARGET_EDGE)
+    loops = boundary_loops(f)
+    on_boundary = np.zeros(len(v), bool)
+    on_boundary[np.concatenate(loops)] = True
+    v = taubin_smooth(v, f, smooth_iterations, on_boundary)
+    return push_out(v, distance, MIN_CLEARANCE), f, loops
+
+
 def build_cut_garment(spec: GarmentSpec, grid, joints, distance) -> Garment:
     v, f = offset_surface(grid, spec.ease, distance)
     cuts = [(c, s) for c in spec.cuts for s in c.sides]
     for cut, side in cuts:
         v, f = clip_mesh(v, f, cut_values(cut, side, joints, v))
     v, f = keep_component_near(v, f, joints[spec.keep_near])
-    v, f = remesh(v, f, TARGET_EDGE)
-    loops = boundary_loops(f)
-    on_boundary = np.zeros(len(v), bool)
-    on_boundary[np.concatenate(loops)] = True
-    v = taubin_smooth(v, f, spec.smooth_iterations, on_boundary)
-    v = push_out(v, distance, MIN_CLEARANCE)
+    v, f, loops = finish_surface(v, f, spec.smooth_iterations, distance)
     openings = {}
     for loop in loops:
         residual = [np.abs(cut_values(c, s, joints, v[loop])).mean() for c, s in cuts]
@@ -212,13 +219,7 @@ def build_skirt(spec: SkirtSpec, body_vertices: np.ndarray, keep: np.ndarray, di
         b = (i + 1) * n_theta + np.arange(n_theta)
         a1, b1 = np.roll(a, -1), np.roll(b, -1)
         f += [np.stack([a, b, b1], 1), np.stack([a, b1, a1], 1)]
-    f = np.concatenate(f)
-    v, f = remesh(v, f, TARGET_EDGE)
-    loops = boundary_loops(f)
-    on_boundary = np.zeros(len(v), bool)
-    on_boundary[np.concatenate(loops)] = True
-    v = taubin_smooth(v, f, spec.smooth_iterations, on_boundary)
-    v = push_out(v, distance, MIN_CLEARANCE)
+    v, f, loops = finish_surface(v, np.concatenate(f), spec.smooth_iterations, distance)
     heights = [v[loop, 2].mean() for loop in loops]
     openings = {"waist": loops[int(np.argmax(heights))], "hem": loops[int(np.argmin(heights))]}
     return Garment(spec.id, spec.name, spec.category, spec.layer_rank, v, f, openings)
