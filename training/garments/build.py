@@ -16,7 +16,7 @@ from service.body import DEFAULT_BETA, BodyModel
 from service.catalog import Garment, save_garment
 from service.mesh import boundary_loops, vertex_normals
 from service.paths import REPO_ROOT, models_dir
-from training.garments.cut import clip_mesh, compact
+from training.garments.cut import clip_mesh, compact, component_near
 from training.garments.sdf import SurfaceDistance, sample_grid
 from training.garments.specs import CATALOG, Cut, GarmentSpec, NeckCut, SkirtSpec
 
@@ -130,14 +130,6 @@ def offset_surface(grid, ease: float, distance: SurfaceDistance):
     return compact(v, f[~bad[labels[f[:, 0]]]])
 
 
-def keep_component_near(vertices, faces, point):
-    from service.mesh import connected_components
-
-    labels = connected_components(faces, len(vertices))
-    keep = labels[np.argmin(np.linalg.norm(vertices - point, axis=1))]
-    return compact(vertices, faces[labels[faces[:, 0]] == keep])
-
-
 def push_out(vertices: np.ndarray, distance: SurfaceDistance, clearance: float) -> np.ndarray:
     """Move vertices closer than ``clearance`` to the body out along the distance gradient."""
     v = vertices.copy()
@@ -168,7 +160,7 @@ def build_cut_garment(spec: GarmentSpec, grid, joints, distance) -> Garment:
     cuts = [(c, s) for c in spec.cuts for s in c.sides]
     for cut, side in cuts:
         v, f = clip_mesh(v, f, cut_values(cut, side, joints, v))
-    v, f = keep_component_near(v, f, joints[spec.keep_near])
+    v, f = component_near(v, f, joints[spec.keep_near])
     v, f, loops = finish_surface(v, f, spec.smooth_iterations, distance)
     openings = {}
     for loop in loops:

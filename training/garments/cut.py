@@ -77,6 +77,18 @@ def compact(vertices: np.ndarray, faces: np.ndarray):
 def largest_component(vertices: np.ndarray, faces: np.ndarray):
     """The connected component with the most faces. Returns (vertices, faces)."""
     labels = connected_components(faces, len(vertices))
-    face_label = labels[faces[:, 0]]
-    keep = np.bincount(face_label).argmax()
-    return compact(vertices, faces[face_label == keep])
+    return _keep_label(vertices, faces, labels, np.bincount(labels[faces[:, 0]]).argmax())
+
+
+def component_near(vertices: np.ndarray, faces: np.ndarray, point: np.ndarray):
+    """The connected component holding the vertex closest to ``point`` (3,).
+
+    A garment keeps the piece around a joint rather than the largest one: after the neck cut
+    the head's offset surface can be as large as a small garment. Returns (vertices, faces).
+    """
+    labels = connected_components(faces, len(vertices))
+    return _keep_label(vertices, faces, labels, labels[np.argmin(np.linalg.norm(vertices - point, axis=1))])
+
+
+def _keep_label(vertices, faces, labels, keep):
+    return compact(vertices, faces[labels[faces[:, 0]] == keep])
