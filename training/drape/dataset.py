@@ -1,0 +1,184 @@
+"""The drape dataset: every catalog garment draped on sampled body shapes (paper Figure 2, top).
+
+Layout under ``data/drapes/`` (resumable: finished bodies are skipped, files appear atomically):
+
+    shapes.json            the sampled betas per split, the seeds and the drape settings
+    train/000.npz ...      one file per body: for each garment its world and canonical vertices
+    test/000.npz ...       held-out shapes, never seen by training
+    build.json             measured build time
+
+Shapes: a scrambled Sobol sequence over the documented adult range of Anny's (gender, height,
+weight) parameters; the test split uses another seed, so no test shape is a training shape.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+from scipy.stats import qmc
+
+from service.body import DEFAULT_BETA, BodyModel
+from service.canonical import CanonicalSpace
+from service.catalog import Garment, load_catalog
+from training.drape import energy
+from training.drape.solve import DrapeProblem, DrapeSettings, body_planes, drape
+
+HEIGHT_PARAM_RANGE = (0.12, 0.72)  # Anny height params of the supported range (~1.35 to ~2.15 m)
+WEIGHT_PARAM_RANGE = (0.0, 1.0)
+PINNED_OPENINGS = ("waist",)  # bottoms hang from their waistband, as if belted
+DEFAULT_DIR = Path("data/drapes")
+
+
+@dataclass(frozen=True)
+class DatasetConfig:
+    n_train: int = 36
+    """Training body shapes."""
+    n_test: int = 8
+    """Held-out body shapes."""
+    train_seed: int = 1
+    test_seed: int = 2
+    garments: tuple[str, ...] = ()
+    """Garment ids; empty means the whole catalog."""
+
+
+def sample_betas(n: int, seed: int) -> np.ndarray:
+    """``(n, 3)`` betas (gender, height, weight) spread over the supported range."""
+    # Draw a power of two (Sobol's balanced size) and keep the first n: the same points as random(n).
+    u = qmc.Sobol(d=3, scramble=True, seed=seed).random_base2(int(np.ceil(np.log2(max(n, 1)))))[:n]
+    lo = np.array([0.0, HEIGHT_PARAM_RANGE[0], WEIGHT_PARAM_RANGE[0]])
+    hi = np.array([1.0, HEIGHT_PARAM_RANGE[1], WEIGHT_PARAM_RANGE[1]])
+    return lo + u * (hi - lo)
+
+
+@dataclass
+class GarmentDrape:
+    world: np.ndarray  # (V, 3) equilibrium on the body
+    canonical: np.ndarray  # (V, 3) the same with the diffused body displacement removed
+    iterations: int
+    converged: bool
+    residual: float
+    min_distance: float  # m, signed distance of the deepest vertex to the body surface
+    seconds: float
+
+
+def drape_garment(
+    garment: Garment, body: np.ndarray, faces: np.ndarray, space: CanonicalSpace, settings: DrapeSettings, planes=None
+) -> GarmentDrape:
+    """Drape one garment (template on the mean body) on a body ``(V, 3)`` and canonicalise it."""
+    t0 = time.perf_counter()
+    planes = planes or body_planes(body, faces)
+    carried = space.to_body(garment.vertices, body)
+    loops = [np.asarray(garment.openings[k], dtype=np.int64) for k in PINNED_OPENINGS if k in garment.openings]
+    pinned = np.concatenate(loops) if loops else np.zeros(0, dtype=np.int64)
+    problem = DrapeProblem(
+        energy.rest_shape(garment.vertices, garment.faces),
+        energy.bending_matrix(garment.vertices, garment.faces),
+        planes, pinned, carried[pinned], settings,
+    )  # fmt: skip
+    result = drape(problem, carried)
+    # Start the inversion from the template shifted by the drape: exact where nothing moved.
+    canonical, _ = space.to_canonical(result.vertices, body, start=garment.vertices + (result.vertices - carried))
+    depth = float(planes.signed_distance(result.vertices)[0].min())
+    return GarmentDrape(
+        result.vertices, canonical, result.iterations, result.converged, result.residual, depth,
+        time.perf_counter() - t0,
+    )  # fmt: skip
+
+
+def _save_atomic(path: Path, arrays: dict) -> None:
+    tmp = path.with_suffix(".tmp.npz")
+    np.savez_compressed(tmp, **arrays)
+    os.replace(tmp, path)
+
+
+_WORKER: dict = {}
+
+
+def _init_worker(garment_ids: tuple[str, ...]) -> None:
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    model = BodyModel.load()
+    catalog = load_catalog()
+    mean = model.vertices(np.asarray(DEFAULT_BETA))
+    _WORKER.update(
+        model=model,
+        garments=[catalog[g] for g in garment_ids],
+        space=CanonicalSpace.build(mean, model.faces),
+    )
+
+
+def _drape_body(job: tuple[Path, np.ndarray, DrapeSettings]) -> tuple[Path, float]:
+    path, beta, settings = job
+    t0 = time.perf_counter()
+    model, space = _WORKER["model"], _WORKER["space"]
+    body = model.vertices(beta)
+    planes = body_planes(body, model.faces)
+    arrays = {"beta": beta}
+    for g in _WORKER["garments"]:
+        d = drape_garment(g, body, model.faces, space, settings, planes)
+        arrays[f"{g.id}/world"] = d.world.astype(np.float32)
+        arrays[f"{g.id}/canonical"] = d.canonical.astype(np.float32)
+        stats = [d.iterations, float(d.converged), d.residual, d.min_distance, d.seconds]
+        arrays[f"{g.id}/stats"] = np.array(stats)
+    _save_atomic(path, arrays)
+    return path, time.perf_counter() - t0
+
+
+STATS = ("iterations", "converged", "residual", "min_distance", "seconds")
+
+
+def build_dataset(out: Path = DEFAULT_DIR, config: DatasetConfig = DatasetConfig(), workers: int = 2) -> dict:
+    """Drape every garment on every shape not yet on disk; returns the build record."""
+    from multiprocessing import get_context
+
+    from tqdm import tqdm
+
+    out = Path(out)
+    garment_ids = config.garments or tuple(load_catalog())
+    settings = DrapeSettings()
+    splits = {"train": sample_betas(config.n_train, config.train_seed), "test": sample_betas(config.n_test, config.test_seed)}
+    manifest = {
+        "config": asdict(config) | {"garments": list(garment_ids)},
+        "settings": asdict(settings),
+        "betas": {k: v.tolist() for k, v in splits.items()},
+    }
+    out.mkdir(parents=True, exist_ok=True)
+    shapes_path = out / "shapes.json"
+    if shapes_path.exists() and json.loads(shapes_path.read_text()) != manifest:
+        raise RuntimeError(f"{shapes_path} was built with another configuration; remove {out} to rebuild")
+    shapes_path.write_text(json.dumps(manifest, indent=1))
+    jobs = []
+    for split, betas in splits.items():
+        (out / split).mkdir(exist_ok=True)
+        jobs += [(out / split / f"{i:03d}.npz", b, settings) for i, b in enumerate(betas)]
+    todo = [j for j in jobs if not j[0].exists()]
+    record_path = out / "build.json"
+    record = json.loads(record_path.read_text()) if record_path.exists() else {"seconds": 0.0, "bodies": 0}
+    t0 = time.perf_counter()
+    with get_context("spawn").Pool(workers, _init_worker, (garment_ids,)) as pool:
+        for _, seconds in tqdm(pool.imap_unordered(_drape_body, todo), total=len(todo), desc="drapes", unit="body"):
+            record["bodies"] += 1
+            record["cpu_seconds"] = record.get("cpu_seconds", 0.0) + seconds
+            record_path.write_text(json.dumps(record, indent=1))
+    record["seconds"] += time.perf_counter() - t0
+    record["workers"] = workers
+    record_path.write_text(json.dumps(record, indent=1))
+    return record
+
+
+def load_split(out: Path, split: str, garment_id: str) -> dict[str, np.ndarray]:
+    """Stacked arrays of one garment over a split: beta (B, 3), world/canonical (B, V, 3), stats."""
+    files = sorted((Path(out) / split).glob("[0-9][0-9][0-9].npz"))
+    if not files:
+        raise FileNotFoundError(f"no drapes in {Path(out) / split}; run python -m training.drape")
+    rows = [np.load(f) for f in files]
+    return {
+        "beta": np.stack([r["beta"] for r in rows]),
+        "world": np.stack([r[f"{garment_id}/world"] for r in rows]),
+        "canonical": np.stack([r[f"{garment_id}/canonical"] for r in rows]),
+        "stats": np.stack([r[f"{garment_id}/stats"] for r in rows]),
+    }
