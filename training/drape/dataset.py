@@ -36,9 +36,9 @@ DEFAULT_DIR = Path("data/drapes")
 
 @dataclass(frozen=True)
 class DatasetConfig:
-    n_train: int = 36
+    n_train: int = 24
     """Training body shapes."""
-    n_test: int = 8
+    n_test: int = 6
     """Held-out body shapes."""
     train_seed: int = 1
     test_seed: int = 2

@@ -42,7 +42,7 @@ class DrapeSettings:
     pin_stiffness: float = 2e4  # N / m^3 (per unit area) for waistband vertices
     step_tol: float = 2e-4  # m: converged when no vertex moved more than this over a window
     window: int = 25  # iterations
-    max_iterations: int = 800
+    max_iterations: int = 400
 
 
 @dataclass
@@ -108,7 +108,7 @@ def body_planes(vertices: np.ndarray, faces: np.ndarray, spacing: float = 3e-3, 
     w = np.stack([1 - s, s * (1 - r2), s * r2], axis=1)
     samples = np.einsum("nk,nkd->nd", w, vertices[faces[tri]])
     normals = (fn / np.maximum(2 * area[:, None], 1e-30))[tri]
-    return BodyPlanes(samples, normals, cKDTree(samples))
+    return BodyPlanes(samples, normals, cKDTree(samples), radius=1.7 * spacing)
 
 
 def drape(problem: DrapeProblem, start: np.ndarray) -> DrapeResult:
