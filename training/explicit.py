@@ -1,0 +1,104 @@
+"""Train the explicit garment models (paper 4.1, eq. 9) from the drape dataset.
+
+    python -m training.explicit [--data data/drapes] [--out models/explicit] [ids...]
+
+Per garment: PCA of the canonical training drapes (components up to 99.9 % of the variance),
+then a small tanh MLP beta -> PCA coefficients trained with full-batch L-BFGS on the vertex
+error (the basis is orthonormal, so coefficient error is vertex error). The MLP is kept tiny
+and weight-decayed because there are only a few dozen training shapes.
+"""
+
+from __future__ import annotations
+
+import argparse
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from service.explicit import ExplicitModel
+from service.paths import models_dir
+from training.drape.dataset import DEFAULT_DIR, load_split
+
+
+@dataclass(frozen=True)
+class ExplicitConfig:
+    hidden: int = 32
+    """Width of the two hidden layers."""
+    max_components: int = 24
+    variance: float = 0.999
+    """PCA keeps the fewest components explaining this share of the variance."""
+    weight_decay: float = 1e-4
+    iterations: int = 300
+    seed: int = 0
+
+
+def pca(data: np.ndarray, max_components: int, variance: float) -> tuple[np.ndarray, np.ndarray]:
+    """(mean (D,), orthonormal basis (K, D)) of rows ``data (B, D)``."""
+    mean = data.mean(axis=0)
+    _, s, vt = np.linalg.svd(data - mean, full_matrices=False)
+    share = np.cumsum(s**2) / max(np.sum(s**2), 1e-30)
+    k = int(min(max_components, np.searchsorted(share, variance) + 1, len(s)))
+    return mean, vt[:k]
+
+
+def fit_explicit(garment_id: str, betas: np.ndarray, canonical: np.ndarray, config=ExplicitConfig()) -> ExplicitModel:
+    """Fit to ``betas (B, 3)`` and canonical drapes ``(B, V, 3)``."""
+    B, V, _ = canonical.shape
+    flat = canonical.reshape(B, -1).astype(np.float64)
+    mean, basis = pca(flat, config.max_components, config.variance)
+    basis = basis.astype(np.float16).astype(np.float64)  # train against the basis that is shipped
+    target = (flat - mean) @ basis.T  # (B, K)
+    shift, scale = betas.mean(axis=0), np.maximum(betas.std(axis=0), 1e-6)
+    torch.manual_seed(config.seed)
+    K = basis.shape[0]
+    net = torch.nn.Sequential(
+        torch.nn.Linear(3, config.hidden), torch.nn.Tanh(),
+        torch.nn.Linear(config.hidden, config.hidden), torch.nn.Tanh(),
+        torch.nn.Linear(config.hidden, K),
+    ).double()  # fmt: skip
+    x = torch.from_numpy((betas - shift) / scale)
+    y = torch.from_numpy(target)
+    opt = torch.optim.LBFGS(net.parameters(), lr=1, max_iter=config.iterations, line_search_fn="strong_wolfe")
+
+    def closure():
+        opt.zero_grad()
+        decay = sum((p**2).sum() for n, p in net.named_parameters() if n.endswith("weight"))
+        loss = ((net(x) - y) ** 2).sum(dim=1).mean() + config.weight_decay * decay
+        loss.backward()
+        return loss
+
+    opt.step(closure)
+    linears = [m for m in net if isinstance(m, torch.nn.Linear)]
+    return ExplicitModel(
+        garment_id,
+        mean.reshape(V, 3).astype(np.float32),
+        basis.reshape(K, V, 3).astype(np.float16),
+        shift, scale,
+        [m.weight.detach().numpy().astype(np.float32) for m in linears],
+        [m.bias.detach().numpy().astype(np.float32) for m in linears],
+    )  # fmt: skip
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("ids", nargs="*")
+    parser.add_argument("--data", type=Path, default=DEFAULT_DIR)
+    parser.add_argument("--out", type=Path, default=None)
+    args = parser.parse_args(argv)
+    import json
+
+    out = args.out or models_dir() / "explicit"
+    ids = args.ids or json.loads((args.data / "shapes.json").read_text())["config"]["garments"]
+    for gid in ids:
+        train = load_split(args.data, "train", gid)
+        model = fit_explicit(gid, train["beta"], train["canonical"])
+        pred = np.stack([model.canonical(b) for b in train["beta"]])
+        err = np.linalg.norm(pred - train["canonical"], axis=2)
+        path = model.save(out / f"{gid}.npz")
+        print(f"{gid}: {model.basis.shape[0]} components, train error mean {err.mean() * 1e3:.2f} mm -> {path}")
+
+
+if __name__ == "__main__":
+    main()
