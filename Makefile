@@ -18,14 +18,19 @@ test: $(VENV)/.installed-test
 	$(BIN)/ruff check .
 	$(BIN)/pytest
 
-# Rebuild every committed model from scratch (body basis, garment catalog), then the manifest.
+# Rebuild every committed model from scratch (body basis, garment catalog, drape dataset,
+# explicit garment models), then the manifest. The drape dataset (data/drapes, ~40 min on
+# 2 cores) resumes where it stopped; delete data/drapes to redo it.
 models: $(VENV)/.installed-test
 	$(BIN)/python -m export.body
 	$(BIN)/python -m training.garments
+	$(BIN)/python -m training.drape
+	$(BIN)/python -m training.explicit
 	$(BIN)/python -m export.manifest
 
 pictures: $(VENV)/.installed-test
 	$(BIN)/python -m training.pictures
+	$(BIN)/python -m training.drape.pictures
 
 lint: $(VENV)/.installed-dev
 	$(BIN)/ruff check .

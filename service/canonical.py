@@ -38,7 +38,7 @@ class TransferWeights:
     weight: np.ndarray  # (N, K) float, rows sum to 1
 
     def apply(self, displacement: np.ndarray) -> np.ndarray:
-        """Diffused displacement ``(N, 3)`` (or ``(B, N, 3)``) of body displacement ``(V, 3)`` or ``(B, V, 3)``."""
+        """Diffused displacement ``(..., N, 3)`` of body displacement ``(..., V, 3)``."""
         displacement = np.asarray(displacement)
         if displacement.shape[-1] != 3:
             raise ValueError(f"displacement must be (..., V, 3), got {displacement.shape}")

@@ -49,7 +49,9 @@ def closest_on_triangles(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndar
     v, t = safe(vb, den), safe(vc, den)
     w = np.stack([1 - v - t, v, t], axis=-1)
     t = np.clip(safe(d4 - d3, (d4 - d3) + (d5 - d6)), 0, 1)
-    w = np.where(((va <= 0) & ((d4 - d3) >= 0) & ((d5 - d6) >= 0))[..., None], np.stack([zero, 1 - t, t], -1), w)
+    w = np.where(
+        ((va <= 0) & ((d4 - d3) >= 0) & ((d5 - d6) >= 0))[..., None], np.stack([zero, 1 - t, t], -1), w
+    )
     t = np.clip(safe(d2, d2 - d6), 0, 1)
     w = np.where(((vb <= 0) & (d2 >= 0) & (d6 <= 0))[..., None], np.stack([1 - t, zero, t], -1), w)
     t = np.clip(safe(d1, d1 - d3), 0, 1)
@@ -91,7 +93,9 @@ def closest_point_reference(points: np.ndarray, vertices: np.ndarray, faces: np.
     w = closest_on_triangles(points[:, None], tri[None, :, 0], tri[None, :, 1], tri[None, :, 2])
     q = np.einsum("nfk,fkd->nfd", w, tri)
     face = np.argmin(np.linalg.norm(points[:, None] - q, axis=2), axis=1)
-    return _finish(points, vertices, faces, face_normals(vertices, faces), face, w[np.arange(len(points)), face])
+    return _finish(
+        points, vertices, faces, face_normals(vertices, faces), face, w[np.arange(len(points)), face]
+    )
 
 
 @dataclass

@@ -32,7 +32,7 @@ class ExplicitModel:
         if betas.ndim != 2 or betas.shape[1] != 3:
             raise ValueError(f"betas must be (B, 3), got {betas.shape}")
         h = (betas - self.beta_shift) / self.beta_scale
-        for i, (w, b) in enumerate(zip(self.weights, self.biases)):
+        for i, (w, b) in enumerate(zip(self.weights, self.biases, strict=True)):
             h = h @ w.T.astype(np.float64) + b
             if i < len(self.weights) - 1:
                 h = np.tanh(h)
@@ -44,8 +44,13 @@ class ExplicitModel:
         return self.mean.astype(np.float64) + np.tensordot(c, self.basis.astype(np.float64), axes=1)
 
     def save(self, path: Path) -> Path:
-        arrays = {"mean": self.mean, "basis": self.basis, "beta_shift": self.beta_shift, "beta_scale": self.beta_scale}
-        for i, (w, b) in enumerate(zip(self.weights, self.biases)):
+        arrays = {
+            "mean": self.mean,
+            "basis": self.basis,
+            "beta_shift": self.beta_shift,
+            "beta_scale": self.beta_scale,
+        }
+        for i, (w, b) in enumerate(zip(self.weights, self.biases, strict=True)):
             arrays[f"w{i}"], arrays[f"b{i}"] = w, b
         path.parent.mkdir(parents=True, exist_ok=True)
         np.savez_compressed(path, garment_id=self.garment_id, **arrays)

@@ -68,7 +68,9 @@ def test_diffused_displacement_does_not_tear_a_shell(body, space):
     clothed = ~np.isin(names, ["head", "hand_l", "hand_r", "foot_l", "foot_r"])
     e = unique_edges(f)
     e = e[clothed[e[:, 0]] & clothed[e[:, 1]]]
-    ratio = np.linalg.norm(moved[e[:, 0]] - moved[e[:, 1]], axis=1) / np.linalg.norm(shell[e[:, 0]] - shell[e[:, 1]], axis=1)
+    ratio = np.linalg.norm(moved[e[:, 0]] - moved[e[:, 1]], axis=1) / np.linalg.norm(
+        shell[e[:, 0]] - shell[e[:, 1]], axis=1
+    )
     assert 0.5 < ratio.min() and ratio.max() < 3.0
 
 

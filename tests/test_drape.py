@@ -90,7 +90,9 @@ def test_bending_equals_the_dihedral_angle_form_for_isometric_bends():
         if len(faces) == 2:
             a, b = faces
             angle = np.arccos(np.clip(normals[a] @ normals[b], -1, 1))
-            hinge += 3 * np.sum((rest[i] - rest[j]) ** 2) / (areas[a] + areas[b]) * (2 * np.sin(angle / 2)) ** 2
+            hinge += (
+                3 * np.sum((rest[i] - rest[j]) ** 2) / (areas[a] + areas[b]) * (2 * np.sin(angle / 2)) ** 2
+            )
     assert e == pytest.approx(0.5 * hinge, rel=1e-3)
 
 
@@ -170,5 +172,7 @@ def test_cloth_square_drapes_over_a_sphere(sphere):
     assert np.all(x[corners, 2] < 0.02)
     # Nearly inextensible: edges change length by at most a few percent.
     e = np.sort(f[:, [0, 1]], axis=1)
-    ratio = np.linalg.norm(x[e[:, 0]] - x[e[:, 1]], axis=1) / np.linalg.norm(rest[e[:, 0]] - rest[e[:, 1]], axis=1)
+    ratio = np.linalg.norm(x[e[:, 0]] - x[e[:, 1]], axis=1) / np.linalg.norm(
+        rest[e[:, 0]] - rest[e[:, 1]], axis=1
+    )
     assert np.abs(ratio - 1).max() < 0.08

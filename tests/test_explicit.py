@@ -45,9 +45,12 @@ def test_explicit_model_matches_torch_forward():
     betas, canonical = _synthetic()
     model = fit_explicit("tshirt", betas, canonical, ExplicitConfig(iterations=50))
     layers = []
-    for i, (w, b) in enumerate(zip(model.weights, model.biases)):
+    for i, (w, b) in enumerate(zip(model.weights, model.biases, strict=True)):
         lin = torch.nn.Linear(w.shape[1], w.shape[0]).double()
-        lin.weight.data, lin.bias.data = torch.from_numpy(w.astype(np.float64)), torch.from_numpy(b.astype(np.float64))
+        lin.weight.data, lin.bias.data = (
+            torch.from_numpy(w.astype(np.float64)),
+            torch.from_numpy(b.astype(np.float64)),
+        )
         layers += [lin] + ([torch.nn.Tanh()] if i < len(model.weights) - 1 else [])
     net = torch.nn.Sequential(*layers)
     x = torch.from_numpy((betas - model.beta_shift) / model.beta_scale)

@@ -43,7 +43,9 @@ def pca(data: np.ndarray, max_components: int, variance: float) -> tuple[np.ndar
     return mean, vt[:k]
 
 
-def fit_explicit(garment_id: str, betas: np.ndarray, canonical: np.ndarray, config=ExplicitConfig()) -> ExplicitModel:
+def fit_explicit(
+    garment_id: str, betas: np.ndarray, canonical: np.ndarray, config=ExplicitConfig()
+) -> ExplicitModel:
     """Fit to ``betas (B, 3)`` and canonical drapes ``(B, V, 3)``."""
     B, V, _ = canonical.shape
     flat = canonical.reshape(B, -1).astype(np.float64)
@@ -82,7 +84,9 @@ def fit_explicit(garment_id: str, betas: np.ndarray, canonical: np.ndarray, conf
 
 
 def main(argv=None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("ids", nargs="*")
     parser.add_argument("--data", type=Path, default=DEFAULT_DIR)
     parser.add_argument("--out", type=Path, default=None)
@@ -97,7 +101,9 @@ def main(argv=None) -> None:
         pred = np.stack([model.canonical(b) for b in train["beta"]])
         err = np.linalg.norm(pred - train["canonical"], axis=2)
         path = model.save(out / f"{gid}.npz")
-        print(f"{gid}: {model.basis.shape[0]} components, train error mean {err.mean() * 1e3:.2f} mm -> {path}")
+        print(
+            f"{gid}: {model.basis.shape[0]} components, train error mean {err.mean() * 1e3:.2f} mm -> {path}"
+        )
 
 
 if __name__ == "__main__":

@@ -36,9 +36,9 @@ DEFAULT_DIR = Path("data/drapes")
 
 @dataclass(frozen=True)
 class DatasetConfig:
-    n_train: int = 24
+    n_train: int = 48
     """Training body shapes."""
-    n_test: int = 6
+    n_test: int = 8
     """Held-out body shapes."""
     train_seed: int = 1
     test_seed: int = 2
@@ -67,13 +67,20 @@ class GarmentDrape:
 
 
 def drape_garment(
-    garment: Garment, body: np.ndarray, faces: np.ndarray, space: CanonicalSpace, settings: DrapeSettings, planes=None
+    garment: Garment,
+    body: np.ndarray,
+    faces: np.ndarray,
+    space: CanonicalSpace,
+    settings: DrapeSettings,
+    planes=None,
 ) -> GarmentDrape:
     """Drape one garment (template on the mean body) on a body ``(V, 3)`` and canonicalise it."""
     t0 = time.perf_counter()
     planes = planes or body_planes(body, faces)
     carried = space.to_body(garment.vertices, body)
-    loops = [np.asarray(garment.openings[k], dtype=np.int64) for k in PINNED_OPENINGS if k in garment.openings]
+    loops = [
+        np.asarray(garment.openings[k], dtype=np.int64) for k in PINNED_OPENINGS if k in garment.openings
+    ]
     pinned = np.concatenate(loops) if loops else np.zeros(0, dtype=np.int64)
     problem = DrapeProblem(
         energy.rest_shape(garment.vertices, garment.faces),
@@ -82,7 +89,9 @@ def drape_garment(
     )  # fmt: skip
     result = drape(problem, carried)
     # Start the inversion from the template shifted by the drape: exact where nothing moved.
-    canonical, _ = space.to_canonical(result.vertices, body, start=garment.vertices + (result.vertices - carried))
+    canonical, _ = space.to_canonical(
+        result.vertices, body, start=garment.vertices + (result.vertices - carried)
+    )
     depth = float(planes.signed_distance(result.vertices)[0].min())
     return GarmentDrape(
         result.vertices, canonical, result.iterations, result.converged, result.residual, depth,
@@ -131,6 +140,17 @@ def _drape_body(job: tuple[Path, np.ndarray, DrapeSettings]) -> tuple[Path, floa
 STATS = ("iterations", "converged", "residual", "min_distance", "seconds")
 
 
+def _extends(old: dict, new: dict) -> bool:
+    """True when ``new`` only adds shapes to ``old`` (Sobol prefixes): finished bodies stay valid."""
+    same = (
+        all(old[k] == new[k] for k in ("settings",))
+        and old["config"]["garments"] == new["config"]["garments"]
+    )
+    seeds = all(old["config"][k] == new["config"][k] for k in ("train_seed", "test_seed"))
+    prefix = all(new["betas"][s][: len(old["betas"][s])] == old["betas"][s] for s in ("train", "test"))
+    return same and seeds and prefix
+
+
 def build_dataset(out: Path = DEFAULT_DIR, config: DatasetConfig = DatasetConfig(), workers: int = 2) -> dict:
     """Drape every garment on every shape not yet on disk; returns the build record."""
     from multiprocessing import get_context
@@ -140,7 +160,10 @@ def build_dataset(out: Path = DEFAULT_DIR, config: DatasetConfig = DatasetConfig
     out = Path(out)
     garment_ids = config.garments or tuple(load_catalog())
     settings = DrapeSettings()
-    splits = {"train": sample_betas(config.n_train, config.train_seed), "test": sample_betas(config.n_test, config.test_seed)}
+    splits = {
+        "train": sample_betas(config.n_train, config.train_seed),
+        "test": sample_betas(config.n_test, config.test_seed),
+    }
     manifest = {
         "config": asdict(config) | {"garments": list(garment_ids)},
         "settings": asdict(settings),
@@ -148,7 +171,7 @@ def build_dataset(out: Path = DEFAULT_DIR, config: DatasetConfig = DatasetConfig
     }
     out.mkdir(parents=True, exist_ok=True)
     shapes_path = out / "shapes.json"
-    if shapes_path.exists() and json.loads(shapes_path.read_text()) != manifest:
+    if shapes_path.exists() and not _extends(json.loads(shapes_path.read_text()), manifest):
         raise RuntimeError(f"{shapes_path} was built with another configuration; remove {out} to rebuild")
     shapes_path.write_text(json.dumps(manifest, indent=1))
     jobs = []
@@ -158,15 +181,18 @@ def build_dataset(out: Path = DEFAULT_DIR, config: DatasetConfig = DatasetConfig
     todo = [j for j in jobs if not j[0].exists()]
     record_path = out / "build.json"
     record = json.loads(record_path.read_text()) if record_path.exists() else {"seconds": 0.0, "bodies": 0}
-    t0 = time.perf_counter()
-    with get_context("spawn").Pool(workers, _init_worker, (garment_ids,)) as pool:
-        for _, seconds in tqdm(pool.imap_unordered(_drape_body, todo), total=len(todo), desc="drapes", unit="body"):
-            record["bodies"] += 1
-            record["cpu_seconds"] = record.get("cpu_seconds", 0.0) + seconds
-            record_path.write_text(json.dumps(record, indent=1))
-    record["seconds"] += time.perf_counter() - t0
+    # Wall time accumulates over interrupted and resumed runs, written after every body.
+    t0, base = time.perf_counter(), record["seconds"]
     record["workers"] = workers
-    record_path.write_text(json.dumps(record, indent=1))
+    if todo:
+        with get_context("spawn").Pool(workers, _init_worker, (garment_ids,)) as pool:
+            for _, seconds in tqdm(
+                pool.imap_unordered(_drape_body, todo), total=len(todo), desc="drapes", unit="body"
+            ):
+                record["bodies"] += 1
+                record["cpu_seconds"] = record.get("cpu_seconds", 0.0) + seconds
+                record["seconds"] = base + time.perf_counter() - t0
+                record_path.write_text(json.dumps(record, indent=1))
     return record
 
 

@@ -164,7 +164,9 @@ class BodyPlanes:
         blended = W > 0
         Ws = np.where(blended, W, 1.0)
         d = (w * p).sum(axis=1) / Ws
-        grad = ((w[:, :, None] * n).sum(axis=1) + ((p - d[:, None])[:, :, None] * dw).sum(axis=1)) / Ws[:, None]
+        grad = ((w[:, :, None] * n).sum(axis=1) + ((p - d[:, None])[:, :, None] * dw).sum(axis=1)) / Ws[
+            :, None
+        ]
         lone = np.flatnonzero(~blended)
         if len(lone):
             _, jn = self.tree.query(x[lone])

@@ -1,0 +1,99 @@
+"""Drape dataset and explicit garment models: per-garment accuracy, penetration, build time.
+
+Run (a few seconds, after ``make models`` or with the committed models and a built dataset)::
+
+    python -m benchmarks.explicit_model [--data data/drapes]
+
+- explicit-model error: mean / max distance in mm between the predicted garment (canonical
+  prediction + diffused body displacement) and the simulated drape, per vertex, on the
+  held-out shapes (never used in training); the training error beside it;
+- penetration: the deepest simulated vertex and the share of simulated vertices more than 1 mm
+  inside the body, against the exact body surface (closest point on its triangles, not the
+  simulator's own smoothed distance), over all shapes;
+- convergence: share of drapes that met the criterion of training/drape/solve.py within its
+  iteration cap, and their mean iterations;
+- the dataset's measured build time (data/drapes/build.json).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+
+from service.body import DEFAULT_BETA, BodyModel
+from service.canonical import CanonicalSpace
+from service.closest import ClosestPoint
+from service.explicit import ExplicitModel
+from training.drape.dataset import DEFAULT_DIR, STATS, load_split
+
+
+def predict_world(
+    model: ExplicitModel, space: CanonicalSpace, body: BodyModel, beta: np.ndarray
+) -> np.ndarray:
+    return space.to_body(model.canonical(beta), body.vertices(beta))
+
+
+def vertex_errors(model, space, body, split) -> np.ndarray:
+    """Per-vertex distances ``(B, V)`` m between prediction and simulation."""
+    pred = np.stack([predict_world(model, space, body, b) for b in split["beta"]])
+    return np.linalg.norm(pred - split["world"], axis=2)
+
+
+def penetration(body: BodyModel, splits: list[dict]) -> tuple[float, float]:
+    """(deepest vertex depth m (negative = inside), share of vertices > 1 mm inside)."""
+    depths = []
+    for split in splits:
+        for beta, world in zip(split["beta"], split["world"], strict=True):
+            closest = ClosestPoint.build(body.vertices(beta), body.faces)
+            depths.append(closest.query(world.astype(np.float64)).signed)
+    d = np.concatenate(depths)
+    return float(d.min()), float(np.mean(d < -1e-3))
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--data", type=Path, default=DEFAULT_DIR)
+    args = parser.parse_args(argv)
+    shapes = json.loads((args.data / "shapes.json").read_text())
+    record = json.loads((args.data / "build.json").read_text())
+    body = BodyModel.load()
+    space = CanonicalSpace.build(body.vertices(np.asarray(DEFAULT_BETA)), body.faces)
+    n_train, n_test = len(shapes["betas"]["train"]), len(shapes["betas"]["test"])
+    print(
+        f"dataset: {n_train} training + {n_test} held-out body shapes"
+        f" x {len(shapes['config']['garments'])} garments"
+    )
+    print(
+        f"build time: {record['seconds'] / 60:.1f} min wall with {record.get('workers', '?')} workers "
+        f"({record.get('cpu_seconds', 0) / 60:.1f} min of worker time, {record['bodies']} bodies)\n"
+    )
+    header = (
+        f"{'garment':<12} {'verts':>6} {'PCA':>4} {'test mean':>10} {'test max':>9} {'train mean':>11} "
+        f"{'deepest':>8} {'>1mm in':>8} {'converged':>10} {'iters':>6}"
+    )
+    print(header)
+    print("-" * len(header))
+    it, conv = STATS.index("iterations"), STATS.index("converged")
+    for gid in shapes["config"]["garments"]:
+        train, test = load_split(args.data, "train", gid), load_split(args.data, "test", gid)
+        model = ExplicitModel.load(gid)
+        test_err = vertex_errors(model, space, body, test)
+        train_err = vertex_errors(model, space, body, train)
+        deepest, share = penetration(body, [train, test])
+        stats = np.concatenate([train["stats"], test["stats"]])
+        print(
+            f"{gid:<12} {train['world'].shape[1]:>6} {model.basis.shape[0]:>4} "
+            f"{test_err.mean() * 1e3:>7.2f} mm {test_err.max() * 1e3:>6.1f} mm "
+            f"{train_err.mean() * 1e3:>8.2f} mm "
+            f"{deepest * 1e3:>5.2f} mm {share * 100:>7.3f}% {stats[:, conv].mean() * 100:>9.0f}% "
+            f"{stats[:, it].mean():>6.0f}"
+        )
+
+
+if __name__ == "__main__":
+    main()
