@@ -106,6 +106,21 @@ def test_gravity_and_pin_gradients():
     _directional_check(lambda y: energy.pin(y, idx, target, w, 50.0), x)
 
 
+def test_friction_gradient_and_free_normal_motion():
+    rest, f, x = _bent_sheet()
+    idx = np.array([1, 4, 9, 16])
+    anchor = x[idx] - 0.01
+    normal = np.random.default_rng(2).normal(size=(4, 3))
+    normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+    w = np.array([1.0, 0.5, 2.0, 1.5])
+    _directional_check(lambda y: energy.friction(y, idx, anchor, normal, w, 30.0), x)
+    # Moving only along the body normal costs nothing: friction resists sliding, not lifting.
+    y = x.copy()
+    y[idx] = anchor + 0.02 * normal
+    e, g = energy.friction(y, idx, anchor, normal, w, 30.0)
+    assert e == pytest.approx(0.0, abs=1e-15) and np.abs(g).max() < 1e-12
+
+
 @pytest.fixture(scope="module")
 def sphere():
     s = trimesh.creation.icosphere(subdivisions=4, radius=0.1)

@@ -26,7 +26,7 @@ from service.body import DEFAULT_BETA, BodyModel
 from service.canonical import CanonicalSpace
 from service.catalog import Garment, load_catalog
 from training.drape import energy
-from training.drape.solve import DrapeProblem, DrapeSettings, body_planes, drape
+from training.drape.solve import DrapeProblem, DrapeSettings, body_planes, drape, stick_to_skin
 
 HEIGHT_PARAM_RANGE = (0.12, 0.72)  # Anny height params of the supported range (~1.35 to ~2.15 m)
 WEIGHT_PARAM_RANGE = (0.0, 1.0)
@@ -36,7 +36,7 @@ DEFAULT_DIR = Path("data/drapes")
 
 @dataclass(frozen=True)
 class DatasetConfig:
-    n_train: int = 48
+    n_train: int = 40
     """Training body shapes."""
     n_test: int = 8
     """Held-out body shapes."""
@@ -64,6 +64,7 @@ class GarmentDrape:
     residual: float
     min_distance: float  # m, signed distance of the deepest vertex to the body surface
     seconds: float
+    last_move: float  # m, largest vertex motion over the solver's last window of iterations
 
 
 def drape_garment(
@@ -82,12 +83,16 @@ def drape_garment(
         np.asarray(garment.openings[k], dtype=np.int64) for k in PINNED_OPENINGS if k in garment.openings
     ]
     pinned = np.concatenate(loops) if loops else np.zeros(0, dtype=np.int64)
+    # Shops sell sizes: the rest shape is graded part of the way to the body (settings.grading),
+    # the rest of the body's change shows as a taut garment on a big body and a loose one on a
+    # small body.
+    graded = garment.vertices + settings.grading * (carried - garment.vertices)
     problem = DrapeProblem(
-        energy.rest_shape(garment.vertices, garment.faces),
-        energy.bending_matrix(garment.vertices, garment.faces),
+        energy.rest_shape(graded, garment.faces),
+        energy.bending_matrix(graded, garment.faces),
         planes, pinned, carried[pinned], settings,
     )  # fmt: skip
-    result = drape(problem, carried)
+    result = drape(stick_to_skin(problem, carried), carried)
     # Start the inversion from the template shifted by the drape: exact where nothing moved.
     canonical, _ = space.to_canonical(
         result.vertices, body, start=garment.vertices + (result.vertices - carried)
@@ -95,7 +100,7 @@ def drape_garment(
     depth = float(planes.signed_distance(result.vertices)[0].min())
     return GarmentDrape(
         result.vertices, canonical, result.iterations, result.converged, result.residual, depth,
-        time.perf_counter() - t0,
+        time.perf_counter() - t0, result.last_move,
     )  # fmt: skip
 
 
@@ -131,13 +136,13 @@ def _drape_body(job: tuple[Path, np.ndarray, DrapeSettings]) -> tuple[Path, floa
         d = drape_garment(g, body, model.faces, space, settings, planes)
         arrays[f"{g.id}/world"] = d.world.astype(np.float32)
         arrays[f"{g.id}/canonical"] = d.canonical.astype(np.float32)
-        stats = [d.iterations, float(d.converged), d.residual, d.min_distance, d.seconds]
+        stats = [d.iterations, float(d.converged), d.residual, d.min_distance, d.seconds, d.last_move]
         arrays[f"{g.id}/stats"] = np.array(stats)
     _save_atomic(path, arrays)
     return path, time.perf_counter() - t0
 
 
-STATS = ("iterations", "converged", "residual", "min_distance", "seconds")
+STATS = ("iterations", "converged", "residual", "min_distance", "seconds", "last_move")
 
 
 def _extends(old: dict, new: dict) -> bool:

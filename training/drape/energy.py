@@ -10,7 +10,9 @@ tests check every gradient against central finite differences.
 - gravity along -Z (Anny's up axis is +Z);
 - body collision: a one-sided quadratic penalty on the signed distance to the body below a
   margin, the distance taken against the tangent plane of the nearest dense body sample;
-- pin: a quadratic spring holding chosen vertices (a waistband) at target positions.
+- pin: a quadratic spring holding chosen vertices (a waistband) at target positions;
+- friction: static (sticking) friction against the skin, a spring on the tangential part of each
+  near-body vertex's motion away from where the garment was put on; free along the normal.
 """
 
 from __future__ import annotations
@@ -227,3 +229,23 @@ def pin(x: np.ndarray, index: np.ndarray, target: np.ndarray, weight: np.ndarray
     g = np.zeros_like(x)
     g[index] = stiffness * weight[:, None] * diff
     return 0.5 * stiffness * float(weight @ np.einsum("pd,pd->p", diff, diff)), g
+
+
+def friction(
+    x: np.ndarray,
+    index: np.ndarray,
+    anchor: np.ndarray,
+    normal: np.ndarray,
+    weight: np.ndarray,
+    stiffness: float,
+):
+    """stiffness/2 * sum weight_i |(I - n_i n_i^T)(x_i - anchor_i)|^2 over ``index (P,)``.
+
+    ``anchor (P, 3)`` where each vertex was put on, ``normal (P, 3)`` unit body normals there,
+    ``weight (P,)`` per-vertex weights (area times how close to the skin it started).
+    """
+    diff = x[index] - anchor
+    tangential = diff - np.einsum("pd,pd->p", diff, normal)[:, None] * normal
+    g = np.zeros_like(x)
+    g[index] = stiffness * weight[:, None] * tangential
+    return 0.5 * stiffness * float(weight @ np.einsum("pd,pd->p", tangential, tangential)), g
