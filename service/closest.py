@@ -70,19 +70,67 @@ class Closest:
     bary: np.ndarray  # (N, 3) its barycentric coordinates in that triangle
     point: np.ndarray  # (N, 3) the closest point
     distance: np.ndarray  # (N,) unsigned distance
-    signed: np.ndarray  # (N,) signed by the face normal: negative inside a closed outward mesh
+    signed: np.ndarray  # (N,) signed by the pseudo-normal: negative inside a closed outward mesh
     normal: np.ndarray  # (N, 3) unit normal of that face
 
 
-def _finish(points, vertices, faces, fn, face, bary) -> Closest:
+@dataclass
+class PseudoNormals:
+    """Angle-weighted pseudo-normals (Baerentzen and Aanaes 2005) of a mesh's vertices and edges.
+
+    The sign of (x - p) . n at the closest point p is only right for the normal of the feature p
+    lies on: a face's normal inside it, the sum of the two face normals on an edge, the
+    angle-weighted vertex normal at a vertex. The face normal alone flips signs in concave places.
+    """
+
+    vertex: np.ndarray  # (V, 3)
+    edge_keys: np.ndarray  # (E,) sorted keys lo * V + hi
+    edge: np.ndarray  # (E, 3)
+
+    @classmethod
+    def build(cls, vertices: np.ndarray, faces: np.ndarray, fn: np.ndarray) -> PseudoNormals:
+        n_v = len(vertices)
+        vertex = np.zeros((n_v, 3))
+        for k in range(3):
+            a = vertices[faces[:, (k + 1) % 3]] - vertices[faces[:, k]]
+            b = vertices[faces[:, (k + 2) % 3]] - vertices[faces[:, k]]
+            cos = np.einsum("fd,fd->f", a, b) / np.maximum(
+                np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1), 1e-300
+            )
+            np.add.at(vertex, faces[:, k], np.arccos(np.clip(cos, -1, 1))[:, None] * fn)
+        e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+        keys = np.minimum(e[:, 0], e[:, 1]) * n_v + np.maximum(e[:, 0], e[:, 1])
+        edge_keys, inverse = np.unique(keys, return_inverse=True)
+        edge = np.zeros((len(edge_keys), 3))
+        np.add.at(edge, inverse, np.tile(fn, (3, 1)))
+        return cls(vertex, edge_keys, edge)
+
+    def at(self, faces: np.ndarray, face: np.ndarray, bary: np.ndarray, fn: np.ndarray) -> np.ndarray:
+        """Pseudo-normals ``(N, 3)`` (not unit) at closest points given by ``face (N,)``, ``bary (N, 3)``."""
+        zero = bary <= 1e-12
+        n_zero = zero.sum(axis=1)
+        out = fn[face].copy()
+        tri = faces[face]
+        vert = n_zero == 2
+        if vert.any():
+            out[vert] = self.vertex[tri[vert][~zero[vert]]]
+        edge = n_zero == 1
+        if edge.any():
+            ends = tri[edge][~zero[edge]].reshape(-1, 2)
+            n_v = len(self.vertex)
+            keys = ends.min(axis=1) * n_v + ends.max(axis=1)
+            pos = np.clip(np.searchsorted(self.edge_keys, keys), 0, len(self.edge_keys) - 1)
+            out[edge] = np.where((self.edge_keys[pos] == keys)[:, None], self.edge[pos], out[edge])
+        return out
+
+
+def _finish(points, vertices, faces, fn, face, bary, pseudo: PseudoNormals) -> Closest:
     point = np.einsum("nk,nkd->nd", bary, vertices[faces[face]])
     diff = points - point
     dist = np.linalg.norm(diff, axis=1)
-    normal = fn[face]
-    # Near edges and vertices the face normal is ambiguous; the direction to the point decides.
-    side = np.einsum("nd,nd->n", diff, normal)
+    side = np.einsum("nd,nd->n", diff, pseudo.at(faces, face, bary, fn))
     sign = np.where(side < 0, -1.0, 1.0)
-    return Closest(face, bary, point, dist, sign * dist, normal)
+    return Closest(face, bary, point, dist, sign * dist, fn[face])
 
 
 def closest_point_reference(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray) -> Closest:
@@ -93,9 +141,9 @@ def closest_point_reference(points: np.ndarray, vertices: np.ndarray, faces: np.
     w = closest_on_triangles(points[:, None], tri[None, :, 0], tri[None, :, 1], tri[None, :, 2])
     q = np.einsum("nfk,fkd->nfd", w, tri)
     face = np.argmin(np.linalg.norm(points[:, None] - q, axis=2), axis=1)
-    return _finish(
-        points, vertices, faces, face_normals(vertices, faces), face, w[np.arange(len(points)), face]
-    )
+    fn = face_normals(vertices, faces)
+    pseudo = PseudoNormals.build(vertices, faces, fn)
+    return _finish(points, vertices, faces, fn, face, w[np.arange(len(points)), face], pseudo)
 
 
 @dataclass
@@ -112,6 +160,7 @@ class ClosestPoint:
     ring: np.ndarray  # (V, R) faces around each vertex, padded with -1
     tree: cKDTree
     fn: np.ndarray  # (F, 3) unit face normals
+    pseudo: PseudoNormals
 
     @classmethod
     def build(cls, vertices: np.ndarray, faces: np.ndarray) -> ClosestPoint:
@@ -125,7 +174,8 @@ class ClosestPoint:
         ring = np.full((len(vertices), max(int(count.max()), 1)), -1, dtype=np.int64)
         slot = np.arange(len(owner)) - np.repeat(start, count)
         ring[owner[order], slot] = order // 3
-        return cls(vertices, faces, ring, cKDTree(vertices), face_normals(vertices, faces))
+        fn = face_normals(vertices, faces)
+        return cls(vertices, faces, ring, cKDTree(vertices), fn, PseudoNormals.build(vertices, faces, fn))
 
     def candidates(self, points: np.ndarray, k: int = 4) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Closest points of ``points (N, 3)`` on each triangle around their k nearest vertices.
@@ -151,4 +201,6 @@ class ClosestPoint:
         cand, w, d = self.candidates(points, k)
         best = np.argmin(d, axis=1)
         rows = np.arange(len(points))
-        return _finish(points, self.vertices, self.faces, self.fn, cand[rows, best], w[rows, best])
+        return _finish(
+            points, self.vertices, self.faces, self.fn, cand[rows, best], w[rows, best], self.pseudo
+        )

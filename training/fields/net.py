@@ -1,0 +1,118 @@
+"""The neural field g(x, beta) = (f, h) of one garment or the body (paper 3.1, eq. 1-5), in torch.
+
+x (canonical space, m) is normalised by the garment's padded bounding box and encoded with Fourier
+features [x, sin(2 pi B x), cos(2 pi B x)] (Tancik et al. 2020; B ~ N(0, sigma^2), fixed), beta is
+normalised over the supported box, and an MLP with SiLU activations (smooth, so that its input
+gradients are smooth too) outputs (f, h) / OUTPUT_SCALE.
+
+``with_gradient`` returns f, h and their x-gradients computed forward-mode as three extra row blocks
+that share every layer's GEMM with the values (DESIGN.md section 5); training uses it for the gradient
+losses and the ONNX export runs the same code, so the exported gradient graph is the trained one.
+The beta part of the first layer is computed once per call (beta is one shape per request).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+BETA_LOW = (0.0, 0.12, 0.0)
+BETA_HIGH = (1.0, 0.72, 1.0)
+OUTPUT_SCALE = 0.1  # m per network output unit
+
+
+@dataclass(frozen=True)
+class FieldConfig:
+    width: int = 64
+    """Width of every hidden layer."""
+    depth: int = 3
+    """Number of hidden layers."""
+    fourier: int = 32
+    """Number of Fourier frequencies; 0 feeds x alone (the ablation without Fourier features)."""
+    sigma: float = 2.0
+    """Standard deviation of the frequencies, cycles per unit of normalised x (half the box)."""
+    grad_weight: float = 0.01
+    """lambda of eq. 1 (m): weight of the L1 gradient losses; 0 is the ablation without them."""
+    steps: int = 3000
+    batch: int = 8192
+    lr: float = 3e-3
+    """Adam learning rate, cosine-decayed to 1 % of it."""
+    n_betas: int = 96
+    """Training body shapes (Sobol over the supported box)."""
+    points_per_beta: int = 8192
+    seed: int = 0
+
+
+class FieldNet(torch.nn.Module):
+    """``forward(x (P, 3), beta (1, 3)) -> (f (P,), h (P,))``; ``with_gradient`` adds (P, 3) twice."""
+
+    def __init__(self, config: FieldConfig, centre: np.ndarray, half_extent: float):
+        super().__init__()
+        self.config = config
+        g = torch.Generator().manual_seed(config.seed)
+        freqs = torch.randn(config.fourier, 3, generator=g, dtype=torch.float64) * config.sigma
+        self.register_buffer("freqs", (2 * math.pi * freqs).float())  # (m, 3) angular
+        self.register_buffer("centre", torch.as_tensor(np.asarray(centre), dtype=torch.float32))
+        self.register_buffer("inv_extent", torch.tensor(1.0 / half_extent, dtype=torch.float32))
+        low, high = torch.tensor(BETA_LOW), torch.tensor(BETA_HIGH)
+        self.register_buffer("beta_shift", (low + high) / 2)
+        self.register_buffer("beta_scale", 2 / (high - low))
+        n_in = 3 + 2 * config.fourier
+        dims = [n_in] + [config.width] * config.depth
+        self.first = torch.nn.Linear(n_in, config.width)
+        self.first_beta = torch.nn.Linear(3, config.width, bias=False)
+        self.hidden = torch.nn.ModuleList(
+            torch.nn.Linear(a, b) for a, b in zip(dims[1:-1], dims[2:], strict=True)
+        )
+        self.out = torch.nn.Linear(config.width, 2)
+
+    def _features(self, x):
+        xn = (x - self.centre) * self.inv_extent  # (P, 3)
+        proj = xn @ self.freqs.T  # (P, m)
+        return xn, proj
+
+    def _first_bias(self, beta):
+        return self.first_beta((beta - self.beta_shift) * self.beta_scale) + self.first.bias  # (1, W)
+
+    def forward(self, x, beta):
+        xn, proj = self._features(x)
+        a = torch.nn.functional.silu(
+            torch.cat([xn, torch.sin(proj), torch.cos(proj)], 1) @ self.first.weight.T + self._first_bias(beta)
+        )
+        for layer in self.hidden:
+            a = torch.nn.functional.silu(layer(a))
+        out = self.out(a) * OUTPUT_SCALE
+        return out[:, 0], out[:, 1]
+
+    def with_gradient(self, x, beta):
+        """(f (P,), h (P,), grad f (P, 3), grad h (P, 3)), gradients forward-mode in stacked rows."""
+        n = x.shape[0]
+        xn, proj = self._features(x)
+        s, c = torch.sin(proj), torch.cos(proj)
+        eye = torch.eye(3, dtype=x.dtype, device=x.device) * self.inv_extent  # d xn / dx
+        # d features / d x_d for d = 0, 1, 2 stacked under the values: (4P, n_in)
+        blocks = [torch.cat([xn, s, c], 1)]
+        for d in range(3):
+            w = self.freqs[:, d] * self.inv_extent  # (m,)
+            blocks.append(torch.cat([eye[d].expand(n, 3), c * w, -s * w], 1))
+        t = torch.cat(blocks, 0) @ self.first.weight.T  # (4P, W): one GEMM
+        z = t[:n] + self._first_bias(beta)
+        for layer in self.hidden:
+            a, da = self._silu_with_grad(z, t[n:])
+            t = torch.cat([a, da], 0) @ layer.weight.T
+            z = t[:n] + layer.bias
+        a, da = self._silu_with_grad(z, t[n:])
+        t = torch.cat([a, da], 0) @ self.out.weight.T * OUTPUT_SCALE  # (4P, 2)
+        out = t[:n] + self.out.bias * OUTPUT_SCALE
+        grad = t[n:].reshape(3, n, 2).permute(1, 0, 2)  # (P, 3, 2)
+        return out[:, 0], out[:, 1], grad[:, :, 0], grad[:, :, 1]
+
+    @staticmethod
+    def _silu_with_grad(z, dz):
+        """(silu(z) (P, W), silu'(z) dz (3P, W)) for tangents ``dz`` stacked in 3 blocks."""
+        sig = torch.sigmoid(z)
+        slope = sig * (1 + z * (1 - sig))
+        return z * sig, dz * slope.repeat(3, 1)
