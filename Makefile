@@ -19,18 +19,21 @@ test: $(VENV)/.installed-test
 	$(BIN)/pytest
 
 # Rebuild every committed model from scratch (body basis, garment catalog, drape dataset,
-# explicit garment models), then the manifest. The drape dataset (data/drapes, ~40 min on
-# 2 cores) resumes where it stopped; delete data/drapes to redo it.
+# explicit garment models, untangling operator, neural fields), then the manifest. Every long
+# step resumes where it stopped (data/drapes, build/*.ckpt, build/fields); delete them to redo.
 models: $(VENV)/.installed-test
 	$(BIN)/python -m export.body
 	$(BIN)/python -m training.garments
 	$(BIN)/python -m training.drape
 	$(BIN)/python -m training.explicit
+	$(BIN)/python -m training.untangler
+	$(BIN)/python -m training.fields
 	$(BIN)/python -m export.manifest
 
 pictures: $(VENV)/.installed-test
 	$(BIN)/python -m training.pictures
 	$(BIN)/python -m training.drape.pictures
+	$(BIN)/python -m training.fields.pictures
 
 lint: $(VENV)/.installed-dev
 	$(BIN)/ruff check .

@@ -8,7 +8,11 @@ export raises unless they match torch within ``EXPORT_TOLERANCE``.
 
 from __future__ import annotations
 
+import fcntl
+import hashlib
 import json
+import os
+import tempfile
 import warnings
 from dataclasses import asdict
 from pathlib import Path
@@ -92,10 +96,18 @@ def export_field(net: FieldNet, field_id: str, directory: Path, x: np.ndarray, b
 def write_config(directory: Path, entries: dict[str, dict]) -> Path:
     """Merge ``entries`` (field id -> metadata) into ``fields.json``, keeping other fields' entries."""
     path = directory / CONFIG_FILE
-    meta = json.loads(path.read_text()) if path.exists() else {"opset": OPSET, "fields": {}}
-    meta["fields"].update(entries)
-    meta["fields"] = dict(sorted(meta["fields"].items()))
-    path.write_text(json.dumps(meta, indent=2) + "\n")
+    directory.mkdir(parents=True, exist_ok=True)
+    # Fields train in parallel processes: read-modify-write under an exclusive lock.
+    key = hashlib.sha1(str(directory.resolve()).encode()).hexdigest()[:12]
+    lock_path = Path(tempfile.gettempdir()) / f"ulnef-fields-{key}.lock"
+    with open(lock_path, "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        meta = json.loads(path.read_text()) if path.exists() else {"opset": OPSET, "fields": {}}
+        meta["fields"].update(entries)
+        meta["fields"] = dict(sorted(meta["fields"].items()))
+        tmp = path.with_suffix(".tmp")
+        tmp.write_text(json.dumps(meta, indent=2) + "\n")
+        os.replace(tmp, path)
     return path
 
 

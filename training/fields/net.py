@@ -26,14 +26,16 @@ OUTPUT_SCALE = 0.1  # m per network output unit
 
 @dataclass(frozen=True)
 class FieldConfig:
-    width: int = 64
-    """Width of every hidden layer."""
+    width: int = 96
+    """Width of every hidden layer (tshirt at 1,000 steps, f / h mm: width 64 3.4 / 3.2 at sigma 2,
+    2.3 / 2.0 at sigma 1; width 96 at sigma 1 2.0 / 1.6; width 128 at sigma 2 2.5 / 2.2)."""
     depth: int = 3
     """Number of hidden layers."""
     fourier: int = 32
     """Number of Fourier frequencies; 0 feeds x alone (the ablation without Fourier features)."""
-    sigma: float = 2.0
-    """Standard deviation of the frequencies, cycles per unit of normalised x (half the box)."""
+    sigma: float = 1.0
+    """Standard deviation of the frequencies, cycles per unit of normalised x (half the box); at
+    1,000 steps sigma 0.5 / 1 / 2 / 5 gave f errors 2.4 / 2.3 / 3.4 / 5.9 mm (width 64)."""
     grad_weight: float = 0.01
     """lambda of eq. 1 (m): weight of the L1 gradient losses; 0 is the ablation without them."""
     steps: int = 3000
@@ -79,9 +81,8 @@ class FieldNet(torch.nn.Module):
 
     def forward(self, x, beta):
         xn, proj = self._features(x)
-        a = torch.nn.functional.silu(
-            torch.cat([xn, torch.sin(proj), torch.cos(proj)], 1) @ self.first.weight.T + self._first_bias(beta)
-        )
+        features = torch.cat([xn, torch.sin(proj), torch.cos(proj)], 1)
+        a = torch.nn.functional.silu(features @ self.first.weight.T + self._first_bias(beta))
         for layer in self.hidden:
             a = torch.nn.functional.silu(layer(a))
         out = self.out(a) * OUTPUT_SCALE

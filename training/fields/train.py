@@ -22,7 +22,13 @@ from service.catalog import load_catalog
 from service.explicit import ExplicitModel
 from training.drape.dataset import sample_betas
 from training.fields.net import FieldConfig, FieldNet
-from training.fields.samples import GROUND_TRUTH_VERSION, PAD, FieldSamples, garment_samples, near_surface_samples
+from training.fields.samples import (
+    GROUND_TRUTH_VERSION,
+    PAD,
+    FieldSamples,
+    garment_samples,
+    near_surface_samples,
+)
 
 BODY = "body"
 TRAIN_SEED, TEST_SEED = 11, 12
@@ -74,7 +80,8 @@ def stack(samples: list[FieldSamples]) -> dict[str, np.ndarray]:
 
 def training_data(surfaces: Surfaces, config: FieldConfig, log=print) -> dict[str, np.ndarray]:
     """Cached ground truth over the training shapes: x, f, grad_f, h, grad_h (P, ...) float32, beta (P, 3)."""
-    name = f"{surfaces.field_id}_{config.n_betas}x{config.points_per_beta}_s{config.seed}_v{GROUND_TRUTH_VERSION}"
+    size = f"{config.n_betas}x{config.points_per_beta}"
+    name = f"{surfaces.field_id}_{size}_s{config.seed}_v{GROUND_TRUTH_VERSION}"
     path = DATA_DIR / f"{name}.npz"
     if path.exists():
         with np.load(path) as z:
@@ -146,9 +153,10 @@ def train_field(
     n_points = len(data["x"])
     end = config.steps if stop_at is None else min(stop_at, config.steps)
     t0 = time.perf_counter()
-    bar = tqdm(range(start, end), desc=name, unit="step", initial=start, total=config.steps, leave=False,
+    bar = tqdm(
+        range(start, end), desc=name, unit="step", initial=start, total=config.steps, leave=False,
         mininterval=10,
-    )
+    )  # fmt: skip
     for step in bar:
         lr = config.lr * (0.01 + 0.99 * 0.5 * (1 + np.cos(np.pi * step / max(config.steps - 1, 1))))
         for group in opt.param_groups:
@@ -184,7 +192,9 @@ def load_trained(surfaces: Surfaces, name: str) -> FieldNet | None:
     return net
 
 
-def held_out(surfaces: Surfaces, n_per_beta: int = 2048, seed: int = 5) -> list[tuple[np.ndarray, FieldSamples]]:
+def held_out(
+    surfaces: Surfaces, n_per_beta: int = 2048, seed: int = 5
+) -> list[tuple[np.ndarray, FieldSamples]]:
     """Per held-out shape (never trained on): (beta (3,), samples within 1 cm of its surface)."""
     out = []
     for i, beta in enumerate(sample_betas(N_TEST_BETAS, TEST_SEED)):

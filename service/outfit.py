@@ -1,0 +1,178 @@
+"""The mix-and-match pipeline (paper Figure 2, bottom row; DESIGN.md section 1), no torch.
+
+beta -> body mesh; explicit garment meshes X*_i(beta) in canonical space; every layer's fields at
+every garment vertex; untangle; L-BFGS fit of each garment to its untangled field (``service.fit``);
+the diffused body displacement carries everything to the body (world space); a quality report with
+the measures of ``service.quality`` before (explicit meshes) and after.
+
+``OutfitModels`` loads everything once (it is what a server keeps); ``make_outfit`` is one request.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+
+from service.body import DEFAULT_BETA, BodyModel
+from service.canonical import CanonicalSpace
+from service.catalog import Garment, load_catalog
+from service.explicit import ExplicitModel
+from service.fields import BODY, FieldSet
+from service.fit import FitResult, FitSettings, fit_garment
+from service.quality import Layer, intersections, penetration
+from service.strain import RestShape, green_strain_norms
+from service.untangle import untangle, untangle_jacobian
+from service.untangle_onnx import N_SLOTS, NeuralUntangler
+
+UntanglerKind = Literal["neural", "reference"]
+MAX_GARMENTS = N_SLOTS - 1
+
+
+@dataclass
+class OutfitModels:
+    """Everything a request needs, loaded once."""
+
+    body: BodyModel
+    catalog: dict[str, Garment]
+    explicit: dict[str, ExplicitModel]
+    fields: FieldSet
+    neural_untangler: NeuralUntangler
+    space: CanonicalSpace
+
+    @classmethod
+    def load(cls, directory: Path | None = None, threads: int = 2) -> OutfitModels:
+        from service.paths import models_dir
+
+        directory = Path(directory or models_dir())
+        body = BodyModel.load(directory / "body" / "anny_shape.npz")
+        catalog = load_catalog(directory / "garments")
+        explicit = {gid: ExplicitModel.load(gid, directory / "explicit") for gid in catalog}
+        return cls(
+            body, catalog, explicit, FieldSet(directory / "fields", threads),
+            NeuralUntangler(directory / "untangler", threads),
+            CanonicalSpace.build(body.vertices(np.asarray(DEFAULT_BETA)), body.faces),
+        )  # fmt: skip
+
+    def untangler(self, kind: UntanglerKind):
+        """The operator as ``service.fit.Untangler``: (f, Jacobian (P, N, 2N) or None)."""
+        if kind == "neural":
+
+            def neural(f_star, h_star, jacobian):
+                out = self.neural_untangler(f_star, h_star, jacobian=jacobian)
+                return out.f, out.jacobian
+
+            return neural
+
+        def reference(f_star, h_star, jacobian):
+            f = untangle(f_star, h_star)
+            if not jacobian:
+                return f, None
+            jac = np.zeros((*f_star.shape, 2 * f_star.shape[1]))
+            jac[:, :, : f_star.shape[1]] = untangle_jacobian(f_star, h_star)
+            return f, jac
+
+        return reference
+
+
+@dataclass
+class Outfit:
+    """World-space meshes (metres, Anny frame: Z up) and the quality report."""
+
+    body_vertices: np.ndarray  # (Vb, 3)
+    body_faces: np.ndarray
+    garments: list[tuple[str, np.ndarray, np.ndarray]]  # (id, vertices (V, 3), faces (F, 3)), inner first
+    report: dict = field(default_factory=dict)
+
+
+def _check_garments(models: OutfitModels, garment_ids: list[str]) -> None:
+    if not 1 <= len(garment_ids) <= MAX_GARMENTS:
+        raise ValueError(f"garments: between 1 and {MAX_GARMENTS} ids, got {len(garment_ids)}")
+    unknown = [g for g in garment_ids if g not in models.catalog]
+    if unknown:
+        raise ValueError(f"garments: unknown ids {unknown}; allowed: {sorted(models.catalog)}")
+    if len(set(garment_ids)) != len(garment_ids):
+        raise ValueError(f"garments: each id at most once, got {garment_ids}")
+
+
+def make_outfit(
+    models: OutfitModels,
+    garment_ids: list[str],
+    beta: np.ndarray,
+    untangle_layers: bool = True,
+    untangler: UntanglerKind = "neural",
+    settings: FitSettings = FitSettings(),
+    measure: bool = True,
+) -> Outfit:
+    """Dress the body of shape ``beta (3,)`` in ``garment_ids`` (inner to outer)."""
+    _check_garments(models, garment_ids)
+    beta = np.asarray(beta, dtype=np.float64)
+    seconds: dict[str, float] = {}
+    t_total = t0 = time.perf_counter()
+    body = models.body.vertices(beta)
+    seconds["body"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    explicit = [models.explicit[g].canonical(beta) for g in garment_ids]
+    faces = [models.catalog[g].faces for g in garment_ids]
+    seconds["explicit"] = time.perf_counter() - t0
+    layer_ids = [BODY, *garment_ids]
+
+    def layer_fields(k, x, gradient):
+        return models.fields(layer_ids[k], x, beta, gradient)
+
+    fitted, fits = list(explicit), []
+    if untangle_layers:
+        op = models.untangler(untangler)
+        for i, (x0, f) in enumerate(zip(explicit, faces, strict=True)):
+            fits.append(fit_garment(x0, f, i + 1, len(layer_ids), layer_fields, op, settings))
+        fitted = [r.vertices if r.ok and np.all(np.isfinite(r.vertices)) else x0
+                  for r, x0 in zip(fits, explicit, strict=True)]  # fmt: skip
+        for key in ("fields", "untangle", "optimise"):
+            seconds[key] = sum(r.seconds[key] for r in fits)
+    t0 = time.perf_counter()
+    world = [models.space.to_body(x, body) for x in fitted]
+    seconds["world"] = time.perf_counter() - t0
+    outfit = Outfit(body, models.body.faces, list(zip(garment_ids, world, faces, strict=True)))
+    report = {"garments": garment_ids, "beta": beta.tolist(), "untangled": untangle_layers}
+    if untangle_layers:
+        report |= _fit_report(garment_ids, explicit, faces, fits, untangler)
+    if measure:
+        t0 = time.perf_counter()
+        before = [models.space.to_body(x, body) for x in explicit] if untangle_layers else world
+        report |= _measures(models, layer_ids, body, beta, explicit, before, fitted, world, faces)
+        seconds["quality"] = time.perf_counter() - t0
+    seconds["total"] = time.perf_counter() - t_total
+    report["seconds"] = {k: round(v, 4) for k, v in seconds.items()}
+    outfit.report = report
+    return outfit
+
+
+def _fit_report(ids, explicit, faces, fits: list[FitResult], untangler: str) -> dict:
+    out = {"untangler": untangler, "fallback": [g for g, r in zip(ids, fits, strict=True) if not r.ok]}
+    for g, x0, f, r in zip(ids, explicit, faces, fits, strict=True):
+        disp = np.linalg.norm(r.vertices - x0, axis=1)
+        out.setdefault("mean_displacement_mm", {})[g] = round(float(disp.mean()) * 1e3, 3)
+        out.setdefault("max_displacement_mm", {})[g] = round(float(disp.max()) * 1e3, 3)
+        strain = green_strain_norms(r.vertices, RestShape.build(x0, f))
+        out.setdefault("mean_green_strain", {})[g] = round(float(strain.mean()), 6)
+        out.setdefault("optimised_vertices", {})[g] = int(r.optimised.sum())
+        out.setdefault("iterations", {})[g] = r.iterations
+        out.setdefault("residual_mm", {})[g] = [round(r.residual_before * 1e3, 3), round(r.residual_after * 1e3, 3)]
+    return out
+
+
+def _measures(models, layer_ids, body, beta, explicit, before, fitted, world, faces) -> dict:
+    out = {}
+    for name, canonical, meshes in (("before", explicit, before), ("after", fitted, world)):
+        layers = [Layer(BODY, body, models.body.faces)]
+        layers += [Layer(g, v, f) for g, v, f in zip(layer_ids[1:], meshes, faces, strict=True)]
+
+        def h_at(inner, outer, canonical=canonical):
+            return models.fields(layer_ids[inner], canonical[outer - 1], beta).h
+
+        out[f"penetration_{name}"] = {k: round(v, 6) for k, v in penetration(layers, h_at).items()}
+        out[f"intersections_{name}"] = intersections(layers)
+    return out
