@@ -1,4 +1,4 @@
-"""The ``ulnef`` command line: ``serve``, ``garments``, ``openapi``."""
+"""The ``ulnef`` command line: ``serve``, ``garments``, ``outfit``, ``openapi``."""
 
 from __future__ import annotations
 
@@ -67,6 +67,28 @@ def cmd_garments(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_outfit(args: argparse.Namespace) -> int:
+    """Dress a body, write the GLB, print the quality report as JSON."""
+    from service.body import ShapeOutOfRange, shape_from_measurements
+    from service.gltf import outfit_glb
+    from service.outfit import OutfitModels, make_outfit
+
+    models = OutfitModels.load(threads=args.threads)
+    ids = [g for g in args.garments.split(",") if g]
+    try:
+        beta = shape_from_measurements(models.body, args.gender, args.height_cm, args.weight_kg)
+        outfit = make_outfit(models, ids, beta, not args.no_untangle, args.untangler)
+    except (ShapeOutOfRange, ValueError) as err:
+        print(f"ulnef outfit: {err}", file=sys.stderr)
+        return 2
+    layers = [(gid, v, f) for gid, v, f in outfit.garments]
+    if not args.no_body:
+        layers.insert(0, ("body", outfit.body_vertices, outfit.body_faces))
+    Path(args.output).write_bytes(outfit_glb(layers))
+    print(json.dumps(outfit.report, indent=2))
+    return 0
+
+
 def cmd_openapi(args: argparse.Namespace) -> int:
     text = render_openapi()
     if args.output == "-":
@@ -89,6 +111,18 @@ def build_parser() -> argparse.ArgumentParser:
     garments = sub.add_parser("garments", help="list the garment catalog")
     garments.add_argument("--json", action="store_true", help="print JSON, as GET /v1/garments answers")
     garments.set_defaults(func=cmd_garments)
+
+    outfit = sub.add_parser("outfit", help="dress a body in garments (inner to outer) and write a GLB")
+    outfit.add_argument("--garments", required=True, help="comma-separated ids, inner to outer")
+    outfit.add_argument("--gender", type=float, default=0.0, help="0 male .. 1 female (default: %(default)s)")
+    outfit.add_argument("--height-cm", type=float, default=178.0, help="(default: %(default)s)")
+    outfit.add_argument("--weight-kg", type=float, default=75.0, help="(default: %(default)s)")
+    outfit.add_argument("--untangler", choices=("neural", "reference"), default="neural")
+    outfit.add_argument("--no-untangle", action="store_true", help="explicit meshes only (tangled)")
+    outfit.add_argument("--no-body", action="store_true", help="leave the body out of the GLB")
+    outfit.add_argument("--threads", type=int, default=2, help="onnxruntime threads (default: %(default)s)")
+    outfit.add_argument("-o", "--output", default="outfit.glb", help="GLB path (default: %(default)s)")
+    outfit.set_defaults(func=cmd_outfit)
 
     openapi = sub.add_parser("openapi", help="write the HTTP API's OpenAPI schema as YAML")
     openapi.add_argument("-o", "--output", default="-", help="output file, '-' for stdout (default: stdout)")

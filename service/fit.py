@@ -99,7 +99,8 @@ def fit_garment(
     untangler: Untangler,
     settings: FitSettings = FitSettings(),
 ) -> FitResult:
-    """Fit garment ``layer`` (1..N-1; 0 is the body) with explicit mesh ``vertices (V, 3)``, ``faces (F, 3)``."""
+    """Fit garment ``layer`` (1..N-1; 0 is the body) with explicit mesh ``vertices (V, 3)``,
+    ``faces (F, 3)``, against the fields of all ``n_layers`` layers."""
     x0 = np.asarray(vertices, dtype=np.float64)
     if x0.ndim != 2 or x0.shape[1] != 3:
         raise ValueError(f"vertices must be (V, 3), got {x0.shape}")

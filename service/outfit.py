@@ -30,6 +30,7 @@ from service.untangle_onnx import N_SLOTS, NeuralUntangler
 
 UntanglerKind = Literal["neural", "reference"]
 MAX_GARMENTS = N_SLOTS - 1
+DEFAULT_FIT = FitSettings()
 
 
 @dataclass
@@ -104,7 +105,7 @@ def make_outfit(
     beta: np.ndarray,
     untangle_layers: bool = True,
     untangler: UntanglerKind = "neural",
-    settings: FitSettings = FitSettings(),
+    settings: FitSettings = DEFAULT_FIT,
     measure: bool = True,
 ) -> Outfit:
     """Dress the body of shape ``beta (3,)`` in ``garment_ids`` (inner to outer)."""
@@ -160,7 +161,8 @@ def _fit_report(ids, explicit, faces, fits: list[FitResult], untangler: str) -> 
         out.setdefault("mean_green_strain", {})[g] = round(float(strain.mean()), 6)
         out.setdefault("optimised_vertices", {})[g] = int(r.optimised.sum())
         out.setdefault("iterations", {})[g] = r.iterations
-        out.setdefault("residual_mm", {})[g] = [round(r.residual_before * 1e3, 3), round(r.residual_after * 1e3, 3)]
+        residual = [round(r.residual_before * 1e3, 3), round(r.residual_after * 1e3, 3)]
+        out.setdefault("residual_mm", {})[g] = residual
     return out
 
 
