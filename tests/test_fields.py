@@ -1,4 +1,4 @@
-"""Neural fields: HRBF covariant field, ground truth signs, network gradients, ONNX export, committed models."""
+"""Neural fields: HRBF covariant field, ground-truth signs, network gradients, ONNX export."""
 
 from __future__ import annotations
 
