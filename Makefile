@@ -34,6 +34,7 @@ pictures: $(VENV)/.installed-test
 	$(BIN)/python -m training.pictures
 	$(BIN)/python -m training.drape.pictures
 	$(BIN)/python -m training.fields.pictures
+	$(BIN)/python -m training.outfit_pictures
 
 lint: $(VENV)/.installed-dev
 	$(BIN)/ruff check .

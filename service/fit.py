@@ -129,6 +129,8 @@ def fit_garment(
         lin = [fields(k, x[idx], True) for k in range(n_layers)]
         seconds["fields"] += time.perf_counter() - t0
         y0 = x[idx].copy()
+        # Only triangles touching an optimised vertex change: the strain of the rest is constant.
+        near = rest.subset(active[faces].any(axis=1))
         a = np.stack([v.f for v in lin], 1)  # (n, N)
         ga = np.stack([v.grad_f for v in lin], 1)  # (n, N, 3)
         b = np.stack([v.h for v in lin], 1)
@@ -136,7 +138,7 @@ def fit_garment(
         t_idx = target[idx]
         timing = {"untangle": 0.0}
 
-        def objective(flat, idx=idx, y0=y0, a=a, ga=ga, b=b, gb=gb, t_idx=t_idx, timing=timing):
+        def objective(flat, idx=idx, y0=y0, a=a, ga=ga, b=b, gb=gb, t_idx=t_idx, timing=timing, near=near):
             y = flat.reshape(-1, 3)
             d = y - y0
             fs = a + np.einsum("nkd,nd->nk", ga, d)
@@ -149,7 +151,7 @@ def fit_garment(
             dfdx += np.einsum("nk,nkd->nd", jac[:, layer, n_layers:], gb)
             xf = x.copy()
             xf[idx] = y
-            es, gs = strain_energy(xf, rest)
+            es, gs = strain_energy(xf, near)
             e = float(r @ r) + settings.omega * es
             g = 2 * r[:, None] * dfdx + settings.omega * gs[idx]
             # In mm^2: L-BFGS-B's absolute gradient tolerance would otherwise stop at microns.

@@ -40,6 +40,10 @@ class RestShape:
         dm_inv[ok] = np.linalg.inv(dm[ok])
         return cls(faces, dm_inv)
 
+    def subset(self, mask: np.ndarray) -> RestShape:
+        """The triangles selected by ``mask (F,) bool`` (their energy, on the same vertices)."""
+        return RestShape(self.faces[mask], self.dm_inv[mask])
+
 
 def strain_energy(x: np.ndarray, rest: RestShape) -> tuple[float, np.ndarray]:
     """(E_strain, gradient ``(V, 3)``) at vertices ``x (V, 3)``."""
@@ -50,10 +54,10 @@ def strain_energy(x: np.ndarray, rest: RestShape) -> tuple[float, np.ndarray]:
     energy = float(np.einsum("fij,fij->", E, E))
     # d||E||^2 / dF = 2 F E; d / dDs = (2 F E) Dm^-T
     g = 2 * F @ E @ np.swapaxes(rest.dm_inv, 1, 2)  # (F, 3, 2)
-    grad = np.zeros_like(x, dtype=np.float64)
-    np.add.at(grad, f[:, 1], g[:, :, 0])
-    np.add.at(grad, f[:, 2], g[:, :, 1])
-    np.add.at(grad, f[:, 0], -g[:, :, 0] - g[:, :, 1])
+    # Scatter the corner gradients with bincount (np.add.at is an order of magnitude slower).
+    corners = np.concatenate([f[:, 1], f[:, 2], f[:, 0]])
+    values = np.concatenate([g[:, :, 0], g[:, :, 1], -g[:, :, 0] - g[:, :, 1]])  # (3F, 3)
+    grad = np.stack([np.bincount(corners, values[:, d], minlength=len(x)) for d in range(3)], 1)
     return energy, grad
 
 

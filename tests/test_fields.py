@@ -184,3 +184,21 @@ class _Broken(torch.nn.Module):
     def forward(self, x, beta):
         f, h, gf, gh = self.net.with_gradient(x, beta)
         return f, h, gf * 1.01, gh
+
+
+def test_committed_fields_reproduce_their_recorded_held_out_errors():
+    """The ONNX files in models/fields give the held-out errors fields.json records (computed with torch
+    at training time), and the T-shirt meets the 1.5 mm target of the field issue."""
+    import json
+
+    from service.fields import FieldSet, default_directory
+    from training.fields.train import Surfaces, field_errors, held_out
+
+    recorded = json.loads((default_directory() / "fields.json").read_text())["fields"]
+    fields = FieldSet(threads=1)
+    for fid in ("tshirt", "body"):
+        err = field_errors(lambda x, b, fid=fid: fields.fields[fid](x, b[0])[:2], held_out(Surfaces(fid)))
+        assert err["f_mm"] == pytest.approx(recorded[fid]["held_out"]["f_mm"], abs=0.01)
+        if fid != "body":  # the served body h is the constant -1, not the network's
+            assert err["h_mm"] == pytest.approx(recorded[fid]["held_out"]["h_mm"], abs=0.01)
+    assert recorded["tshirt"]["held_out"]["f_mm"] <= 1.5 and recorded["tshirt"]["held_out"]["h_mm"] <= 1.5

@@ -13,7 +13,7 @@ import torch
 from export.fields import export_field, field_entry, write_config
 from service.catalog import load_catalog
 from service.fields import default_directory
-from training.fields.net import FieldConfig
+from training.fields.net import FieldConfig, fourier_sigma
 from training.fields.train import BODY, Surfaces, field_errors, held_out, torch_predict, train_field
 
 parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -25,7 +25,8 @@ torch.set_num_threads(args.threads)
 out = default_directory()
 for field_id in args.ids or [*load_catalog(), BODY]:
     surfaces = Surfaces(field_id)
-    result = train_field(surfaces, replace(FieldConfig(), steps=args.steps))
+    sigma = fourier_sigma(surfaces.box()[1])
+    result = train_field(surfaces, replace(FieldConfig(), steps=args.steps, sigma=sigma))
     tests = held_out(surfaces)
     errors = field_errors(torch_predict(result.net), tests)
     beta, samples = tests[0]

@@ -1,0 +1,71 @@
+"""A small outfit end to end on the committed models: the end-to-end issue's measures, the CLI, GLB."""
+
+from __future__ import annotations
+
+import io
+import json
+
+import numpy as np
+import pytest
+import trimesh
+
+from service.cli import main
+from service.outfit import OutfitModels, make_outfit
+from training.drape.dataset import sample_betas
+
+pytest.importorskip("onnxruntime")
+
+
+@pytest.fixture(scope="module")
+def models():
+    return OutfitModels.load()
+
+
+@pytest.fixture(scope="module")
+def held_out_beta():
+    return sample_betas(2, 3)[1]  # the outfit benchmark's body seed: used by no training
+
+
+def _tangle(report: dict, when: str) -> tuple[int, float]:
+    """(intersecting triangle pairs over all layer pairs, largest penetrating share of a garment)."""
+    return sum(report[f"intersections_{when}"].values()), max(report[f"penetration_{when}"].values())
+
+
+@pytest.mark.parametrize("untangler", ["reference", "neural"])
+def test_tshirt_under_jacket_untangles(models, held_out_beta, untangler):
+    r = make_outfit(models, ["tshirt", "jacket"], held_out_beta, untangler=untangler).report
+    pairs_before, pen_before = _tangle(r, "before")
+    pairs_after, pen_after = _tangle(r, "after")
+    # The explicit models alone tangle deeply (thousands of crossing triangle pairs)...
+    assert pairs_before > 1000 and pen_before > 0.05
+    # ...untangling removes most of it. The end-to-end issue's targets (0 pairs, <= 0.1 %) are not
+    # met yet (README, Outfits): these bounds hold the pipeline to what it measurably does today.
+    assert pairs_after < 0.35 * pairs_before, r["intersections_after"]
+    assert pen_after < 0.3 * pen_before, r["penetration_after"]
+    assert r["fallback"] == []
+    # Only the tangled regions move: the mean vertex moves by millimetres.
+    assert max(r["mean_displacement_mm"].values()) < 5
+
+
+def test_bad_garments_are_refused(models, held_out_beta):
+    for ids, match in ((["tshirt", "tshirt"], "at most once"), (["cape"], "unknown"), ([], "between")):
+        with pytest.raises(ValueError, match=match):
+            make_outfit(models, ids, held_out_beta)
+
+
+def test_cli_writes_a_glb_and_prints_the_report(tmp_path, capsys):
+    out = tmp_path / "o.glb"
+    code = main(["outfit", "--garments", "tank_top,tshirt", "--gender", "1", "--height-cm", "165",
+                 "--weight-kg", "60", "-o", str(out)])  # fmt: skip
+    assert code == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["garments"] == ["tank_top", "tshirt"]
+    scene = trimesh.load(io.BytesIO(out.read_bytes()), file_type="glb", process=False)
+    assert sorted(scene.graph.nodes_geometry) == ["body", "tank_top", "tshirt"]
+    assert all(np.isfinite(g.vertices).all() for g in scene.geometry.values())
+
+
+def test_cli_names_the_bad_field(tmp_path, capsys):
+    code = main(["outfit", "--garments", "tshirt", "--height-cm", "400", "-o", str(tmp_path / "x.glb")])
+    assert code == 2
+    assert "height_cm" in capsys.readouterr().err
