@@ -69,3 +69,12 @@ def test_cli_names_the_bad_field(tmp_path, capsys):
     code = main(["outfit", "--garments", "tshirt", "--height-cm", "400", "-o", str(tmp_path / "x.glb")])
     assert code == 2
     assert "height_cm" in capsys.readouterr().err
+
+
+def test_serving_path_imports_no_torch():
+    import subprocess
+    import sys
+
+    modules = "service.app, service.cli, service.outfit, service.fields, service.fit, service.gltf"
+    code = f"import sys, {modules}; sys.exit('torch' in sys.modules or 'training' in sys.modules)"
+    assert subprocess.run([sys.executable, "-c", code], check=False).returncode == 0
