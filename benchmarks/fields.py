@@ -17,12 +17,12 @@ from __future__ import annotations
 
 import argparse
 import json
-import time
 from dataclasses import replace
 
 import numpy as np
 import torch
 
+from benchmarks.untangler import median_ms
 from service.fields import FieldSet, default_directory
 from training.fields.net import FieldConfig
 from training.fields.train import (
@@ -44,16 +44,6 @@ def ablation_net(surfaces: Surfaces, base: FieldConfig, variant: str):
     if net is None:
         net = train_field(surfaces, replace(base, **VARIANTS[variant]), name=name).net
     return net
-
-
-def median_ms(fn, repeats: int = 7) -> float:
-    fn()
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return 1e3 * float(np.median(times))
 
 
 def main(argv=None) -> None:
@@ -79,8 +69,8 @@ def main(argv=None) -> None:
         err = field_errors(lambda x, b, fid=fid: fields(fid, x, b[0])[:2], tests)
         full[fid] = err
         beta = tests[0][0]
-        t_val = median_ms(lambda fid=fid, beta=beta: fields(fid, x30, beta))
-        t_grad = median_ms(lambda fid=fid, beta=beta: fields(fid, x30, beta, gradient=True))
+        t_val = median_ms(lambda fid=fid, beta=beta: fields(fid, x30, beta), 7)
+        t_grad = median_ms(lambda fid=fid, beta=beta: fields(fid, x30, beta, gradient=True), 7)
         c = meta[fid]["config"]
         h = f"{err['h_mm']:.2f}" if fid != "body" else "-"
         print(

@@ -21,6 +21,7 @@ import numpy as np
 import onnx
 import torch
 
+from export.untangler import max_excess
 from service.fields import (
     CONFIG_FILE,
     EXPORT_TOLERANCE,
@@ -48,12 +49,6 @@ class _Values(torch.nn.Module):
 class _WithGradient(_Values):
     def forward(self, x, beta):
         return self.net.with_gradient(x, beta)
-
-
-def max_excess(ours: np.ndarray, theirs: np.ndarray, tolerance: tuple[float, float]) -> float:
-    """max(|ours - theirs| - (atol + rtol |theirs|)): <= 0 when within tolerance."""
-    atol, rtol = tolerance
-    return float(np.max(np.abs(ours - theirs) - (atol + rtol * np.abs(theirs))))
 
 
 def export_field(net: FieldNet, field_id: str, directory: Path, x: np.ndarray, beta: np.ndarray) -> dict:

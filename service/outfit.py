@@ -25,7 +25,7 @@ from service.fields import BODY, FieldSet, FieldValues
 from service.fit import FitResult, FitSettings, fit_garment
 from service.quality import Layer, intersections, penetration
 from service.strain import RestShape, green_strain_norms
-from service.untangle import untangle, untangle_jacobian
+from service.untangle import untangle_with_jacobian
 from service.untangle_onnx import N_SLOTS, NeuralUntangler
 
 UntanglerKind = Literal["neural", "reference"]
@@ -82,15 +82,7 @@ class OutfitModels:
 
             return neural
 
-        def reference(f_star, h_star, jacobian):
-            f = untangle(f_star, h_star)
-            if not jacobian:
-                return f, None
-            jac = np.zeros((*f_star.shape, 2 * f_star.shape[1]))
-            jac[:, :, : f_star.shape[1]] = untangle_jacobian(f_star, h_star)
-            return f, jac
-
-        return reference
+        return untangle_with_jacobian
 
 
 @dataclass

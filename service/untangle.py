@@ -157,6 +157,18 @@ def untangle_jacobian(f_star, h_star, weights=None, delta: float = GAP_DELTA) ->
     return jac
 
 
+def untangle_with_jacobian(f_star, h_star, jacobian: bool = True, delta: float = GAP_DELTA):
+    """``untangle`` with default weights as the fit calls an operator: (f ``(B, N)``, Jacobian
+    ``(B, N, 2N)`` w.r.t. (f*, h*) or None). The h* columns are 0: the exact operator is piecewise
+    constant in h*."""
+    f = untangle(f_star, h_star, delta=delta)
+    if not jacobian:
+        return f, None
+    jac = np.zeros((*f.shape, 2 * f.shape[1]))
+    jac[:, :, : f.shape[1]] = untangle_jacobian(f_star, h_star, delta=delta)
+    return f, jac
+
+
 def untangle_minmax(f_star, h_star, weights=None, delta: float = GAP_DELTA) -> np.ndarray:
     """Untangled fields ``(B, N)`` by the min-max formula; the reference for ``untangle``.
 
