@@ -88,10 +88,10 @@ def test_models_inside_and_found_by_the_service(steps):
 
 def test_workers_and_threads_from_environment(steps):
     env = " ".join(args for kw, args in steps if kw == "ENV")
-    for name in ("WEB_CONCURRENCY", "ULNEF_THREADS", "OMP_NUM_THREADS", "UVICORN_HOST", "UVICORN_PORT"):
+    for name in ("ULNEF_WORKERS", "ULNEF_ONNX_THREADS", "OMP_NUM_THREADS", "ULNEF_HOST", "ULNEF_PORT"):
         assert f"{name}=" in env
-    cmd = next(args for kw, args in steps if kw == "CMD")
-    assert "service.app:app" in cmd and "--workers" not in cmd and "--port" not in cmd
+    # `ulnef serve` reads host and port from ULNEF_HOST/ULNEF_PORT: no flag may pin them.
+    assert next(args for kw, args in steps if kw == "CMD") == '["ulnef", "serve"]'
 
 
 def test_healthcheck_hits_an_app_route(steps):
