@@ -9,12 +9,14 @@ PIP_INSTALL := PIP_DISABLE_PIP_VERSION_CHECK=1 $(PIP) install -q
 # wheel (pip find-links) is what satisfies anny's torch requirement, not the CUDA build.
 TORCH_PIN := $(shell grep -o '"torch==[^"]*"' pyproject.toml | tr -d '"')
 
-.PHONY: serve test lint models pictures clean distclean
+JS_DIR := tests/js
+
+.PHONY: serve test lint models pictures clean distclean chromium
 
 serve: $(VENV)/.installed-serve
 	$(BIN)/ulnef serve
 
-test: $(VENV)/.installed-test
+test: $(VENV)/.installed-test $(JS_DIR)/node_modules/.installed chromium
 	$(BIN)/ruff check .
 	$(BIN)/pytest
 
@@ -56,6 +58,20 @@ $(VENV)/.installed-test: pyproject.toml | $(BIN)/python
 	$(PIP_INSTALL) '$(TORCH_PIN)'
 	$(PIP_INSTALL) -e '.[serve,train,dev]'
 	touch $@ $(VENV)/.installed-serve $(VENV)/.installed-dev
+
+# Node tools for the glTF-validator and page tests (pinned in tests/js/package-lock.json), and
+# Debian's chromium for the page test (installed only as root and only when missing). Without
+# them those tests skip on a developer machine and fail in CI (CI=true).
+$(JS_DIR)/node_modules/.installed: $(JS_DIR)/package.json $(JS_DIR)/package-lock.json
+	@if command -v npm >/dev/null; then \
+		cd $(JS_DIR) && npm ci --no-audit --no-fund --loglevel=error && touch node_modules/.installed; \
+	else echo "npm not found: the glTF-validator and page tests will skip" >&2; fi
+
+chromium:
+	@command -v chromium >/dev/null || [ "$$(id -u)" != 0 ] || ! command -v apt-get >/dev/null || \
+		{ apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium >/dev/null; } || \
+		echo "apt-get could not install chromium" >&2
+	@command -v chromium >/dev/null || echo "chromium not found (Debian: apt-get install chromium): the page test will skip" >&2
 
 clean:
 	rm -rf build dist *.egg-info .pytest_cache .ruff_cache

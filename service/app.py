@@ -1,112 +1,22 @@
-"""The HTTP app: routes translate HTTP to ``service`` calls and nothing else."""
+"""Builds the HTTP app: routes (``service.api``), error answers, middleware, start-up and shutdown."""
 
 from __future__ import annotations
 
-import logging
-import zipfile
+from contextlib import asynccontextmanager
 from importlib.metadata import PackageNotFoundError, version
-from typing import Annotated, Literal
 
-from fastapi import APIRouter, Depends, FastAPI, HTTPException, Request, Response
+from fastapi import FastAPI
 from fastapi.middleware.cors import CORSMiddleware
 from fastapi.routing import APIRoute
-from pydantic import BaseModel, ConfigDict, Field
 
-from service.catalog import Category, Garment, load_catalog
+from service import errors, logs
+from service.api import garments, outfits, page, probes
+from service.api.garments import CATALOG_NOT_LOADED, try_load_catalog
+from service.middleware import AccessLog, BodyLimit
+from service.runtime import EngineFactory, TryOn, load_engine
 from service.settings import Settings
 
-log = logging.getLogger(__name__)
-CATALOG_NOT_LOADED = "garment catalog not loaded"
-# What a missing, partial or corrupt catalog raises; anything else is a bug and should surface.
-CATALOG_ERRORS = (OSError, ValueError, KeyError, zipfile.BadZipFile)
-
-
-class GarmentSummary(BaseModel):
-    model_config = ConfigDict(
-        json_schema_extra={
-            "example": {
-                "id": "tshirt",
-                "name": "T-shirt",
-                "category": "top",
-                "layer_rank": 1,
-                "vertices": 5210,
-                "faces": 10128,
-                "openings": ["left_sleeve", "neck", "right_sleeve", "waist"],
-            }
-        }
-    )
-
-    id: str = Field(description="Garment id, as used in outfit requests.")
-    name: str = Field(description="Human-readable name.")
-    category: Category = Field(description="`top` or `bottom`.")
-    layer_rank: int = Field(description="Default stacking rank in its category; lower is nearer the body.")
-    vertices: int = Field(description="Vertex count of the rest mesh.")
-    faces: int = Field(description="Triangle count of the rest mesh.")
-    openings: list[str] = Field(description="Names of the garment's openings (boundary loops), sorted.")
-
-
-class GarmentList(BaseModel):
-    garments: list[GarmentSummary] = Field(description="Every catalog garment, in catalog order.")
-
-
-class Health(BaseModel):
-    status: Literal["ok"] = Field(description="Always `ok`: the process answers.")
-
-
-class Readiness(BaseModel):
-    ready: bool = Field(description="Whether the models are loaded and requests can be served.")
-    garments: int | None = Field(default=None, description="Number of catalog garments, when ready.")
-    detail: str | None = Field(default=None, description="Why the service is not ready.")
-
-
-def get_settings(request: Request) -> Settings:
-    return request.app.state.settings
-
-
-SettingsDep = Annotated[Settings, Depends(get_settings)]
-
-
-def try_load_catalog(settings: Settings) -> dict[str, Garment] | None:
-    try:
-        return load_catalog(settings.garments_dir())
-    except CATALOG_ERRORS as e:
-        log.warning("%s: %s", CATALOG_NOT_LOADED, e)
-        return None
-
-
-def get_catalog(settings: SettingsDep) -> dict[str, Garment]:
-    catalog = try_load_catalog(settings)
-    if catalog is None:
-        raise HTTPException(status_code=503, detail=CATALOG_NOT_LOADED)
-    return catalog
-
-
-CatalogDep = Annotated[dict[str, Garment], Depends(get_catalog)]
-
-probes = APIRouter(tags=["probes"])
-garments = APIRouter(prefix="/v1", tags=["garments"])
-
-
-@probes.get("/healthz")
-def healthz() -> Health:
-    """Liveness: the process answers."""
-    return Health(status="ok")
-
-
-@probes.get("/readyz", response_model_exclude_none=True, responses={503: {"model": Readiness}})
-def readyz(settings: SettingsDep, response: Response) -> Readiness:
-    """Readiness: the garment catalog loads."""
-    catalog = try_load_catalog(settings)
-    if catalog is None:
-        response.status_code = 503
-        return Readiness(ready=False, detail=CATALOG_NOT_LOADED)
-    return Readiness(ready=True, garments=len(catalog))
-
-
-@garments.get("/garments", responses={503: {"description": CATALOG_NOT_LOADED}})
-def list_garments(catalog: CatalogDep) -> GarmentList:
-    """The garment catalog."""
-    return GarmentList(garments=[GarmentSummary(**g.summary()) for g in catalog.values()])
+__all__ = ["CATALOG_NOT_LOADED", "create_app", "try_load_catalog"]
 
 
 def package_version() -> str:
@@ -121,19 +31,52 @@ def operation_id(route: APIRoute) -> str:
     return route.name
 
 
-def create_app(settings: Settings | None = None) -> FastAPI:
+def create_app(settings: Settings | None = None, engine_factory: EngineFactory = load_engine) -> FastAPI:
+    """The app; models load when it starts (lifespan), and a models directory that differs from its
+    manifest makes start-up fail (``service.runtime.ModelIntegrityError``)."""
     settings = settings if settings is not None else Settings()
+    tryon = TryOn(settings, engine_factory)
+
+    @asynccontextmanager
+    async def lifespan(app: FastAPI):
+        if settings.configure_logging:
+            logs.configure(settings.log_level, settings.log_format)
+        tryon.start()
+        yield
+        tryon.stop()
+
     app = FastAPI(
         title="ULNeF try-on service",
         version=package_version(),
         generate_unique_id_function=operation_id,
+        lifespan=lifespan,
     )
     app.state.settings = settings
+    app.state.tryon = tryon
+
+    def garment_ids() -> list[str]:
+        if tryon.engine is not None:
+            return tryon.engine.garment_ids()
+        catalog = try_load_catalog(settings)
+        return list(catalog) if catalog else []
+
+    errors.install(app, garment_ids)
+    # Added innermost first: the access log sees every answer, the size limit's 413 included.
     if settings.cors_origins:
-        app.add_middleware(CORSMiddleware, allow_origins=settings.cors_origins, allow_methods=["GET", "POST"])
-    app.include_router(probes)
-    app.include_router(garments)
+        app.add_middleware(
+            CORSMiddleware, allow_origins=settings.cors_origins, allow_methods=["GET", "POST"],
+            allow_headers=["Content-Type", "Accept"], expose_headers=["X-Outfit-Id", "Content-Location"],
+        )  # fmt: skip
+    app.add_middleware(BodyLimit, max_bytes=settings.max_body_bytes)
+    app.add_middleware(AccessLog, metrics=tryon.metrics)
+    app.include_router(probes.router)
+    app.include_router(garments.router)
+    app.include_router(outfits.router)
+    app.include_router(page.router)
+    app.mount("/static", page.static_files(), name="static")
     return app
 
 
+# For `uvicorn service.app:app` (the container): settings from the environment; nothing loads
+# until the server starts the app.
 app = create_app()

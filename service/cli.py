@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import logging
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -51,9 +50,21 @@ def format_table(rows: list[dict]) -> str:
 def cmd_serve(args: argparse.Namespace) -> int:
     import uvicorn
 
+    from service.logs import configure
+    from service.runtime import ModelIntegrityError, check_models
+
     settings = Settings(host=args.host, port=args.port)
-    logging.basicConfig(level=settings.log_level.upper(), format="%(levelname)s:     %(name)s: %(message)s")
-    uvicorn.run(create_app(settings), host=settings.host, port=settings.port, log_level=settings.log_level)
+    configure(settings.log_level, settings.log_format)
+    if settings.verify_models:
+        try:
+            check_models(settings)  # the app checks again on start; this gives a plain exit status
+        except ModelIntegrityError as e:
+            print(f"ulnef serve: {e}", file=sys.stderr)
+            return 1
+    uvicorn.run(
+        create_app(settings), host=settings.host, port=settings.port, log_level=settings.log_level,
+        log_config=None, limit_concurrency=settings.max_connections, timeout_graceful_shutdown=20,
+    )  # fmt: skip
     return 0
 
 

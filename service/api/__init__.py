@@ -1,0 +1,1 @@
+"""HTTP routes: each module translates HTTP to ``service`` calls and nothing else."""

@@ -1,0 +1,124 @@
+"""Helpers for the HTTP tests: a fake engine, a live server in a thread, external tools (node, chromium).
+
+External tools skip their tests on a developer machine that lacks them, but fail them in CI
+(``CI=true``), where `make test` installs them: a missing tool must not pass silently there.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import socket
+import subprocess
+import threading
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+import numpy as np
+import pytest
+import uvicorn
+
+from service.catalog import Garment
+from service.gltf import outfit_glb
+from service.tryon import InvalidField, OutfitResult, OutfitSpec, check_garment_ids
+
+JS_DIR = Path(__file__).parent / "js"
+NODE_MODULES = JS_DIR / "node_modules"
+CHROMIUM = os.environ.get("CHROMIUM", "/usr/bin/chromium")
+
+
+def in_ci() -> bool:
+    return os.environ.get("CI", "").lower() in ("1", "true", "yes")
+
+
+def require(condition: bool, what: str) -> None:
+    """Skip (developer machine) or fail (CI) when ``condition`` is false."""
+    if condition:
+        return
+    message = f"{what} missing: run `make test` (it installs node packages and chromium)"
+    if in_ci():
+        pytest.fail(message)
+    pytest.skip(message)
+
+
+def require_node(*packages: str) -> str:
+    node = shutil.which("node")
+    require(node is not None, "node")
+    for package in packages:
+        require((NODE_MODULES / package).is_dir(), f"npm package {package} (tests/js/node_modules)")
+    return node
+
+
+def run_node(script: str, *args: str, timeout: float = 300, env: dict | None = None) -> str:
+    node = require_node()
+    proc = subprocess.run(
+        [node, str(JS_DIR / script), *args], capture_output=True, text=True, timeout=timeout,
+        cwd=JS_DIR, env={**os.environ, **(env or {})}, check=False,
+    )  # fmt: skip
+    assert proc.returncode == 0, f"{script} failed ({proc.returncode}):\n{proc.stderr[-4000:]}"
+    return proc.stdout
+
+
+class FakeEngine:
+    """An ``Engine`` over a small catalog: the catalog's rest meshes on a dummy body, in
+    ``delay`` seconds. A body taller than 200 cm is refused for gender above 0.5, as the real body
+    model refuses some heights for some genders."""
+
+    model_version = "fake"
+
+    def __init__(self, catalog: dict[str, Garment], delay: float = 0.0, nan: bool = False):
+        self.catalog = catalog
+        self.delay = delay
+        self.nan = nan
+        self.calls = 0
+        self._lock = threading.Lock()
+
+    def garment_ids(self) -> list[str]:
+        return list(self.catalog)
+
+    def validate(self, spec: OutfitSpec) -> None:
+        check_garment_ids(spec.garments, self.garment_ids(), 4)
+        if spec.gender > 0.5 and spec.height_cm > 200:
+            raise InvalidField("body.height_cm", f"height_cm={spec.height_cm:g} is too tall", "135.6-200.8")
+
+    def make(self, spec: OutfitSpec) -> OutfitResult:
+        with self._lock:
+            self.calls += 1
+        time.sleep(self.delay)
+        layers = [(g, self.catalog[g].vertices, self.catalog[g].faces) for g in spec.garments]
+        if spec.include_body:
+            body = np.array([[0, 0, 0], [0.2, 0, 0], [0, 0, 1.7], [0, 0.2, 0]], dtype=np.float64)
+            layers.insert(0, ("body", body, np.array([[0, 1, 2], [0, 2, 3], [0, 3, 1], [1, 3, 2]])))
+        report = {"garments": list(spec.garments), "numerical_fallback": [],
+                  "seconds": {"body": 0.0, "total": self.delay}}  # fmt: skip
+        return OutfitResult(outfit_glb(layers), report)
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@contextmanager
+def live_server(app, limit_concurrency: int | None = None, ready_timeout: float = 120) -> Iterator[str]:
+    """Serve ``app`` with uvicorn on a free port in a thread; yields the base URL once /readyz is
+    true (or fails the test after ``ready_timeout`` s)."""
+    port = free_port()
+    config = uvicorn.Config(app, host="127.0.0.1", port=port, log_config=None, log_level="warning",
+                            limit_concurrency=limit_concurrency)  # fmt: skip
+    server = uvicorn.Server(config)
+    thread = threading.Thread(target=server.run, daemon=True)
+    thread.start()
+    try:
+        deadline = time.monotonic() + 30
+        while not server.started:
+            assert thread.is_alive() and time.monotonic() < deadline, "server did not start"
+            time.sleep(0.05)
+        assert app.state.tryon.wait_loaded(ready_timeout), app.state.tryon.detail
+        yield f"http://127.0.0.1:{port}"
+    finally:
+        server.should_exit = True
+        thread.join(30)
