@@ -99,6 +99,10 @@ echo "run: /readyz 200 after $(($(date +%s) - t0)) s: $ready"
 health=healthy
 podman "${STORE[@]}" healthcheck run "$NAME" >/dev/null 2>&1 || health=unhealthy
 echo "run: user $(podman "${STORE[@]}" exec "$NAME" id -u), healthcheck $health"
+t1=$(date +%s)
+podman "${STORE[@]}" exec "$NAME" ulnef outfit --garments pants,tshirt -o /tmp/smoke.glb >/dev/null \
+    || { echo "build.sh: ulnef outfit failed inside the container" >&2; exit 1; }
+echo "run: ulnef outfit pants,tshirt inside the container: $(($(date +%s) - t1)) s, GLB in the tmpfs"
 pid=$(podman "${STORE[@]}" inspect --format '{{.State.Pid}}' "$NAME")
 echo "run: server RSS $(awk '/VmRSS/ {printf "%.0f MB", $2/1024}' "/proc/$pid/status")"
 if [[ ${KEEP_RUNNING:-0} == 1 ]]; then
