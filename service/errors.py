@@ -10,8 +10,10 @@ import re
 from collections.abc import Callable
 
 from fastapi import FastAPI, Request
+from fastapi.exception_handlers import http_exception_handler
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
+from starlette.exceptions import HTTPException
 
 from service.runtime import NotReady
 from service.schemas import ALLOWED
@@ -68,6 +70,16 @@ def install(app: FastAPI, garment_ids: Callable[[], list[str]]) -> None:
     async def invalid_request(request: Request, exc: RequestValidationError) -> JSONResponse:
         errors = field_errors(list(exc.errors()), garment_ids())
         return JSONResponse({"detail": _summary(errors), "errors": errors}, status_code=422)
+
+    @app.exception_handler(HTTPException)
+    async def http_error(request: Request, exc: HTTPException):
+        # FastAPI's only 400 is a body it could not decode (e.g. not UTF-8): answer it like
+        # malformed JSON, so every bad body is a 422 that says what is allowed.
+        if exc.status_code == 400:
+            errors = [{"field": "(request body)", "message": "malformed JSON (not UTF-8 text)",
+                       "allowed": ALLOWED[""]}]  # fmt: skip
+            return JSONResponse({"detail": _summary(errors), "errors": errors}, status_code=422)
+        return await http_exception_handler(request, exc)
 
     @app.exception_handler(InvalidField)
     async def invalid_field(request: Request, exc: InvalidField) -> JSONResponse:

@@ -182,6 +182,15 @@ def test_malformed_json(client: TestClient):
     assert error["field"] == "(request body)" and error["message"].startswith("malformed JSON")
 
 
+def test_body_that_is_not_utf8(client: TestClient):
+    headers = {"Content-Type": "application/json"}
+    response = client.post("/v1/outfits", content=b"\xff\xfe\xfa", headers=headers)
+    assert response.status_code == 422
+    (error,) = response.json()["errors"]
+    assert error == {"field": "(request body)", "message": "malformed JSON (not UTF-8 text)",
+                     "allowed": ALLOWED_REQUEST}  # fmt: skip
+
+
 def test_oversized_body_is_413_with_or_without_content_length(client: TestClient):
     big = b'{"garments": ["tshirt"], "pad": "' + b"x" * 20_000 + b'"}'
     expected = {"detail": "request body too large: at most 16384 bytes (setting ULNEF_MAX_BODY_BYTES)"}
