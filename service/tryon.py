@@ -49,7 +49,8 @@ class OutfitSpec:
 
     def canonical_json(self) -> str:
         """Stable text of the request: same outfit, same text (floats by ``repr``, keys sorted)."""
-        return json.dumps(asdict(self), sort_keys=True, separators=(",", ":"))
+        fields = asdict(self) | {k: float(getattr(self, k)) for k in ("gender", "height_cm", "weight_kg")}
+        return json.dumps(fields | {"garments": list(self.garments)}, sort_keys=True, separators=(",", ":"))
 
     def outfit_id(self, model_version: str) -> str:
         """32 hex chars naming this outfit on these models (a new model version gives new ids)."""

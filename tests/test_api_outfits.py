@@ -4,6 +4,8 @@ content negotiation, cache, validation messages, size limit, overload and deadli
 from __future__ import annotations
 
 import asyncio
+import json
+import logging
 import time
 from pathlib import Path
 
@@ -13,6 +15,7 @@ from fastapi.testclient import TestClient
 
 from service.app import create_app
 from service.catalog import load_catalog
+from service.logs import JsonFormatter
 from service.settings import Settings
 from tests.service_tools import FakeEngine, live_server
 
@@ -254,3 +257,13 @@ def test_burst_gets_timely_answers_and_a_bounded_queue(fake_models_dir: Path):
         metrics = httpx.get(f"{base}/metrics").text
         assert "ulnef_queue_depth 0.0" in metrics
         assert httpx.get(f"{base}/healthz").status_code == 200
+
+
+def test_each_request_is_one_json_log_line(client: TestClient, caplog):
+    caplog.set_level(logging.INFO, logger="service.access")
+    response = client.post("/v1/outfits", json={"garments": ["cape"]})
+    (record,) = [r for r in caplog.records if r.name == "service.access"]
+    line = json.loads(JsonFormatter().format(record))
+    assert line["message"] == "request" and line["level"] == "info"
+    assert line["route"] == "/v1/outfits" and line["status"] == 422 and line["method"] == "POST"
+    assert line["request_id"] == response.headers["x-request-id"] and line["ms"] >= 0
