@@ -116,17 +116,23 @@ class TryOn:
         Overloaded, DeadlineExceeded."""
         engine = self.require_engine()
         key = spec.outfit_id(engine.model_version)
-        cached = self.cache.get(key)
-        self.metrics.cache.labels("hit" if cached else "miss").inc()
-        if cached is not None:
-            return key, cached, True
-        engine.validate(spec)
-        timeout = self.settings.request_timeout_s
         try:
-            future = self._submit(key, spec, engine, time.monotonic() + timeout)
+            return await self._outfit(key, spec, engine)
         except Overloaded:
             self.metrics.rejected.labels("overloaded").inc()
             raise
+
+    async def _outfit(self, key: str, spec: OutfitSpec, engine: Engine) -> tuple[str, OutfitResult, bool]:
+        cached = self.cache.get(key)
+        if cached is not None:
+            self.metrics.cache.labels("hit").inc()
+            return key, cached, True
+        if key not in self._inflight:
+            self.worker.check_room()  # refuse a full house before spending time on validation
+        engine.validate(spec)  # before counting a miss: an invalid request is no cache lookup
+        self.metrics.cache.labels("miss").inc()
+        timeout = self.settings.request_timeout_s
+        future = self._submit(key, spec, engine, time.monotonic() + timeout)
         # asyncio.wait, not wait_for: a timeout must not cancel a job other requests share.
         wrapped = asyncio.wrap_future(future)
         done, _ = await asyncio.wait({wrapped}, timeout=timeout)

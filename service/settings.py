@@ -54,8 +54,10 @@ class Settings(BaseSettings):
     )
     max_body_bytes: int = Field(default=16_384, ge=256, description="Largest accepted request body.")
     max_connections: int | None = Field(
-        default=64, ge=1, description="Concurrent connections uvicorn accepts before answering 503."
-    )
+        default=1000, ge=1,
+        description="Last-resort bound on open connections: beyond it uvicorn answers every request a "
+        "plain 503 (no Retry-After), so keep it far above what the queue turns away cleanly.",
+    )  # fmt: skip
     cache_entries: int = Field(default=64, ge=0, description="Recent outfits kept (LRU); 0 disables.")
     cache_bytes: int = Field(default=256 * 2**20, ge=0, description="Byte budget of the outfit cache.")
 

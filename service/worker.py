@@ -57,10 +57,14 @@ class BoundedWorker:
         """Seconds until a slot is likely free: the queue ahead divided among the workers."""
         return max(1, min(60, math.ceil(self._job_s * max(self._pending, 1) / self.workers)))
 
+    def check_room(self) -> None:
+        """Raise ``Overloaded`` when every place is taken (a cheap early check; ``submit`` rechecks)."""
+        if self._pending >= self.capacity:
+            raise Overloaded(f"{self._pending} outfits in progress, at capacity", self.retry_after())
+
     def submit(self, fn: Callable[[], T], deadline: float) -> Future[T]:
         with self._lock:
-            if self._pending >= self.capacity:
-                raise Overloaded(f"{self._pending} outfits in progress, at capacity", self.retry_after())
+            self.check_room()
             wait = self._job_s * (self._pending // self.workers + 1)
             if time.monotonic() + wait > deadline and self._pending >= self.workers:
                 raise Overloaded(f"estimated wait {wait:.1f} s exceeds the request's time budget",
