@@ -63,4 +63,5 @@ def test_serve_runs_uvicorn_on_requested_address(monkeypatch: pytest.MonkeyPatch
     assert main(["serve", "--host", "0.0.0.0", "--port", "9001"]) == 0
     [(app, kwargs)] = calls
     assert isinstance(app, FastAPI)
-    assert kwargs == {"host": "0.0.0.0", "port": 9001, "log_level": "info"}
+    assert kwargs == {"host": "0.0.0.0", "port": 9001, "log_level": "info", "log_config": None,
+                      "limit_concurrency": 1000, "timeout_graceful_shutdown": 20}  # fmt: skip
