@@ -98,7 +98,9 @@ done
 echo "run: /readyz 200 after $(($(date +%s) - t0)) s: $ready"
 health=healthy
 podman "${STORE[@]}" healthcheck run "$NAME" >/dev/null 2>&1 || health=unhealthy
-echo "run: user $(podman "${STORE[@]}" exec "$NAME" id -u), healthcheck $health"
+rootfs_rw=read-only
+podman "${STORE[@]}" exec "$NAME" touch /app/probe 2>/dev/null && rootfs_rw=WRITABLE
+echo "run: user $(podman "${STORE[@]}" exec "$NAME" id -u), root filesystem $rootfs_rw, healthcheck $health"
 # One outfit through the HTTP API, as the GLB itself (the pipeline is not interrupted: generous budget).
 outfit=$(python3 - "$PORT" <<'PY'
 import json, sys, time, urllib.request
