@@ -20,10 +20,12 @@ import numpy as np
 from service.body import DEFAULT_BETA, BodyModel
 from service.canonical import CanonicalSpace
 from service.catalog import Garment, load_catalog
+from service.closest import ClosestPoint
 from service.explicit import ExplicitModel
 from service.fields import BODY, FieldSet, FieldValues
 from service.fit import FitResult, FitSettings, fit_garment
 from service.quality import Layer, intersections, penetration
+from service.repair import RepairSettings, repair_layer
 from service.strain import RestShape, green_strain_norms
 from service.untangle import untangle_with_jacobian
 from service.untangle_onnx import N_SLOTS, NeuralUntangler
@@ -32,6 +34,7 @@ UntanglerKind = Literal["neural", "reference"]
 BodyFieldKind = Literal["exact", "neural"]
 MAX_GARMENTS = N_SLOTS - 1
 DEFAULT_FIT = FitSettings()
+DEFAULT_REPAIR = RepairSettings()
 
 
 @dataclass
@@ -61,7 +64,9 @@ class OutfitModels:
     @classmethod
     def load(cls, directory: Path | None = None, threads: int = 2) -> OutfitModels:
         from service.paths import models_dir
+        from service.tuning import tune_process
 
+        tune_process()
         directory = Path(directory or models_dir())
         body = BodyModel.load(directory / "body" / "anny_shape.npz")
         catalog = load_catalog(directory / "garments")
@@ -114,8 +119,13 @@ def make_outfit(
     settings: FitSettings = DEFAULT_FIT,
     measure: bool = True,
     body_field: BodyFieldKind = "exact",
+    repair: bool = True,
+    repair_settings: RepairSettings = DEFAULT_REPAIR,
 ) -> Outfit:
-    """Dress the body of shape ``beta (3,)`` in ``garment_ids`` (inner to outer)."""
+    """Dress the body of shape ``beta (3,)`` in ``garment_ids`` (inner to outer).
+
+    With ``untangle_layers``: the field fit, then (``repair``) the exact repair of ``service.repair``.
+    """
     _check_garments(models, garment_ids)
     beta = np.asarray(beta, dtype=np.float64)
     seconds: dict[str, float] = {}
@@ -145,19 +155,50 @@ def make_outfit(
     t0 = time.perf_counter()
     world = [models.space.to_body(x, body) for x in fitted]
     seconds["world"] = time.perf_counter() - t0
+    fit_world, repairs = world, []
+    if untangle_layers and repair:
+        t0 = time.perf_counter()
+        world, repairs = _repair(models, layer_ids, beta, body, fitted, world, faces, repair_settings)
+        seconds["repair"] = time.perf_counter() - t0
     outfit = Outfit(body, models.body.faces, list(zip(garment_ids, world, faces, strict=True)))
     report = {"garments": garment_ids, "beta": beta.tolist(), "untangled": untangle_layers}
     if untangle_layers:
         report |= _fit_report(garment_ids, explicit, faces, fits, untangler)
+    if repairs:
+        report["repair"] = {
+            g: {"moved_vertices": int(r.moved.sum()), "rounds": r.rounds, "crossing_pairs": r.crossing_pairs}
+            for g, r in zip(garment_ids, repairs, strict=True)
+        }
     if measure:
         t0 = time.perf_counter()
         before = [models.space.to_body(x, body) for x in explicit] if untangle_layers else world
         report |= _measures(models, layer_ids, body, beta, explicit, before, fitted, world, faces)
+        if repairs:
+            fit_only = _measures(models, layer_ids, body, beta, explicit, before, fitted, fit_world, faces)
+            report["penetration_fit"] = fit_only["penetration_after"]
+            report["intersections_fit"] = fit_only["intersections_after"]
         seconds["quality"] = time.perf_counter() - t0
     seconds["total"] = time.perf_counter() - t_total
     report["seconds"] = {k: round(v, 4) for k, v in seconds.items()}
     outfit.report = report
     return outfit
+
+
+def _repair(models, layer_ids, beta, body, fitted, world, faces, settings: RepairSettings):
+    """Repaired world meshes and their ``RepairResult``s, body first, each layer against the final
+    inner ones; "covers" is the inner garment's h < 0 at the layer's fitted canonical vertices."""
+    inner = [(ClosestPoint.build(body, models.body.faces), True)]
+    out, results = [], []
+    for i, (x, f) in enumerate(zip(world, faces, strict=True)):
+
+        def covers(j, idx, i=i):
+            return models.fields(layer_ids[j], fitted[i][idx], beta).h < 0
+
+        r = repair_layer(x, f, inner, covers, settings)
+        out.append(r.vertices if np.all(np.isfinite(r.vertices)) else x)
+        results.append(r)
+        inner.append((ClosestPoint.build(out[-1], f), False))
+    return out, results
 
 
 def _fit_report(ids, explicit, faces, fits: list[FitResult], untangler: str) -> dict:

@@ -112,3 +112,4 @@ def test_only_conflicting_vertices_and_their_rings_move():
     clearance = res.vertices[:, 2] - bump(res.vertices)
     assert clearance.min() > GAP_DELTA - FitSettings().conflict_tol
     assert res.residual_after <= FitSettings().conflict_tol
+

@@ -36,7 +36,7 @@ DEFAULT_DIR = Path("data/drapes")
 
 @dataclass(frozen=True)
 class DatasetConfig:
-    n_train: int = 40
+    n_train: int = 14
     """Training body shapes."""
     n_test: int = 8
     """Held-out body shapes."""

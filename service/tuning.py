@@ -1,0 +1,53 @@
+"""Process settings that the pipeline's many mid-sized numpy temporaries need (measured, see below).
+
+- glibc returns every freed block over its mmap threshold (128 KiB at start) to the kernel, so each
+  temporary of a few thousand vertices costs fresh page faults. On this machine's VM that made
+  ``a + 0.5 * b`` on 30,000 doubles take 0.21 ms of CPU instead of 0.016 ms. Raising the mmap
+  threshold and the trim threshold keeps those blocks in the heap (``mallopt``).
+- OpenBLAS starts a thread team for every vector op; when the cores are busy (a server under load,
+  concurrent requests) a 30,000-element dot product took 0.55 ms instead of 0.005 ms. The
+  parallelism worth having is between requests, so BLAS runs single-threaded (``threadpoolctl``).
+
+``tune_process`` is idempotent and a no-op where glibc or threadpoolctl is missing.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import ctypes.util
+import logging
+
+log = logging.getLogger(__name__)
+
+M_TRIM_THRESHOLD, M_TOP_PAD, M_MMAP_THRESHOLD = -1, -2, -3  # glibc malloc.h
+MMAP_THRESHOLD = 32 << 20  # bytes: blocks up to this size stay in the heap when freed
+TRIM_THRESHOLD = 128 << 20  # bytes of free heap top kept instead of returned to the kernel
+_tuned = {"done": False, "limits": None}
+
+
+def tune_process(blas_threads: int = 1) -> dict[str, bool]:
+    """Apply both settings once per process; returns which of them took effect."""
+    if _tuned["done"]:
+        return _tuned["applied"]
+    applied = {"malloc": False, "blas": False}
+    name = ctypes.util.find_library("c")
+    try:
+        libc = ctypes.CDLL(name or "libc.so.6")
+        mallopt = libc.mallopt
+    except (OSError, AttributeError):
+        mallopt = None
+    if mallopt is not None:
+        applied["malloc"] = all(
+            mallopt(param, value) == 1
+            for param, value in ((M_MMAP_THRESHOLD, MMAP_THRESHOLD), (M_TRIM_THRESHOLD, TRIM_THRESHOLD),
+                                 (M_TOP_PAD, 16 << 20))
+        )  # fmt: skip
+    try:
+        from threadpoolctl import threadpool_limits
+
+        _tuned["limits"] = threadpool_limits(blas_threads, user_api="blas")
+        applied["blas"] = True
+    except ImportError:
+        log.info("threadpoolctl not installed: BLAS keeps its default thread count")
+    _tuned.update(done=True, applied=applied)
+    return applied
