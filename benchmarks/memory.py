@@ -57,7 +57,8 @@ def main(argv=None) -> int:
         if args.url:
             url, pid = check_loopback(args.url), args.pid
         else:
-            server = stack.enter_context(LocalServer())
+            # Memory, not latency: a request budget as long as the client waits.
+            server = stack.enter_context(LocalServer(env={"ULNEF_REQUEST_TIMEOUT_S": str(args.timeout)}))
             url, pid = server.url, server.process.pid
         rows.append(["ready (models loaded)", "-", *rss_mb(pid)])
         catalog = fetch_catalog(url)

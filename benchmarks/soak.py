@@ -109,6 +109,8 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser.add_argument("--max-growth-mb", type=float, default=64.0, help="(%(default)s)")
     parser.add_argument("--timeout", type=float, default=120.0, help="per request, seconds (%(default)s)")
     parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--server-env", action="append", default=[], metavar="NAME=VALUE",
+                        help="more environment for the server this command starts (repeatable)")  # fmt: skip
     args = parser.parse_args(argv)
     if not 0 < args.minutes <= MAX_MINUTES:
         parser.error(f"--minutes must be in (0, {MAX_MINUTES:g}]")
@@ -123,9 +125,10 @@ def main(argv=None) -> int:
         if args.url:
             url, pid = check_loopback(args.url), args.pid
         else:
-            server = stack.enter_context(LocalServer(env=SOAK_SERVER_ENV))
+            env = SOAK_SERVER_ENV | dict(kv.split("=", 1) for kv in args.server_env)
+            server = stack.enter_context(LocalServer(env=env))
             url, pid = server.url, server.process.pid
-            print(f"server: {url}, ready in {server.startup_s:.1f} s, env {SOAK_SERVER_ENV}", flush=True)
+            print(f"server: {url}, ready in {server.startup_s:.1f} s, env {env}", flush=True)
         print(format_table(SAMPLE_HEADER, []), flush=True)
         results, samples = asyncio.run(soak(url, pid, args))
     stats = Stats.of(results, samples[-1][0])
