@@ -234,8 +234,14 @@ class Stats:
 
 
 def format_table(header: Sequence[str], rows: Sequence[Sequence[object]]) -> str:
-    """Markdown table; floats with one decimal."""
-    cells = [[f"{c:.1f}" if isinstance(c, float) else str(c) for c in row] for row in rows]
+    """Markdown table; floats with one decimal, or three significant digits below 1 (0.0512 req/s)."""
+
+    def cell(c: object) -> str:
+        if isinstance(c, float):
+            return f"{c:.3g}" if abs(c) < 1 else f"{c:.1f}"
+        return str(c)
+
+    cells = [[cell(c) for c in row] for row in rows]
     lines = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
     return "\n".join(lines + ["| " + " | ".join(row) + " |" for row in cells])
 
