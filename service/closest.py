@@ -189,10 +189,21 @@ class ClosestPoint:
         cand = self.ring[near].reshape(len(points), -1)  # (N, k R)
         valid = cand >= 0
         cand = np.where(valid, cand, self.ring[near[:, :1], 0])
-        tri = self.vertices[self.faces[cand]]  # (N, C, 3, 3)
-        w = closest_on_triangles(points[:, None], tri[:, :, 0], tri[:, :, 1], tri[:, :, 2])
-        q = np.einsum("nck,nckd->ncd", w, tri)
-        d = np.linalg.norm(points[:, None] - q, axis=2)
+        # The rings of neighbouring vertices share most triangles (~4x repeats at k = 4): test each
+        # (point, triangle) pair once and copy the result to its repeats.
+        order = np.argsort(cand, axis=1, kind="stable")
+        ranked = np.take_along_axis(cand, order, 1)
+        first = np.ones(ranked.shape, dtype=bool)
+        first[:, 1:] = ranked[:, 1:] != ranked[:, :-1]
+        rows, cols = np.nonzero(first)
+        tri = self.vertices[self.faces[ranked[rows, cols]]]  # (M, 3, 3)
+        p = points[rows]
+        w_unique = closest_on_triangles(p, tri[:, 0], tri[:, 1], tri[:, 2])  # (M, 3)
+        d_unique = np.linalg.norm(p - np.einsum("mk,mkd->md", w_unique, tri), axis=1)
+        slot = (np.cumsum(first.ravel()) - 1).reshape(first.shape)  # unique pair of each entry
+        w, d = np.empty(cand.shape + (3,)), np.empty(cand.shape)
+        np.put_along_axis(w, order[:, :, None], w_unique[slot], 1)
+        np.put_along_axis(d, order, d_unique[slot], 1)
         return cand, w, np.where(valid, d, np.inf)
 
     def query(self, points: np.ndarray, k: int = 4) -> Closest:

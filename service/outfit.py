@@ -25,7 +25,7 @@ from service.explicit import ExplicitModel
 from service.fields import BODY, FieldSet, FieldValues
 from service.fit import FitResult, FitSettings, fit_garment
 from service.quality import Layer, intersections, penetration
-from service.repair import RepairSettings, repair_layer
+from service.repair import REACH, Inner, RepairSettings, repair_layer
 from service.strain import RestShape, green_strain_norms
 from service.untangle import untangle_with_jacobian
 from service.untangle_onnx import N_SLOTS, NeuralUntangler
@@ -185,19 +185,22 @@ def make_outfit(
 
 
 def _repair(models, layer_ids, beta, body, fitted, world, faces, settings: RepairSettings):
-    """Repaired world meshes and their ``RepairResult``s, body first, each layer against the final
-    inner ones; "covers" is the inner garment's h < 0 at the layer's fitted canonical vertices."""
-    inner = [(ClosestPoint.build(body, models.body.faces), True)]
+    """Repaired world meshes and their ``RepairResult``s, each layer against the final inner ones.
+
+    Which vertices can be near an inner layer, and where it covers them, comes from the fields at the
+    layer's fitted canonical vertices (values only; the learned body field is enough for that)."""
+    inner = [(ClosestPoint.build(body, models.body.faces), True, BODY)]
     out, results = [], []
     for i, (x, f) in enumerate(zip(world, faces, strict=True)):
-
-        def covers(j, idx, i=i):
-            return models.fields(layer_ids[j], fitted[i][idx], beta).h < 0
-
-        r = repair_layer(x, f, inner, covers, settings)
+        layers = []
+        for mesh, closed, field_id in inner:
+            v = models.fields(field_id, fitted[i], beta)
+            near = v.f < REACH if closed else np.abs(v.f) < REACH
+            layers.append(Inner(mesh, closed, near, v.h < 0))
+        r = repair_layer(x, f, layers, settings)
         out.append(r.vertices if np.all(np.isfinite(r.vertices)) else x)
         results.append(r)
-        inner.append((ClosestPoint.build(out[-1], f), False))
+        inner.append((ClosestPoint.build(out[-1], f), False, layer_ids[i + 1]))
     return out, results
 
 

@@ -14,25 +14,35 @@ the body outwards (inner layers are final when an outer one is repaired):
 3. Exact edge-triangle tests find the triangle pairs still crossing (an inner bump poking between
    outer vertices); their outer vertices get twice the margin, and the loop repeats.
 
-Everything is local to the vertices near an inner layer, found with a KD-tree: most vertices are far
-from every inner layer and are never touched.
+Everything is local to the vertices that the fields place within ``REACH`` of an inner layer (the
+caller's ``Inner.near``): most vertices are far from every inner layer and are never queried.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from service.closest import ClosestPoint
 from service.fit import dilate, vertex_neighbours
 from service.intersections import intersecting_pairs
 from service.quality import PENETRATION_BAND
 
-# covers(j, idx (K,)) -> (K,) bool: whether inner layer j covers the layer's vertices idx (its h < 0)
-Covers = Callable[[int, np.ndarray], np.ndarray]
+REACH = 0.03
+"""m: vertices whose field distance to an inner layer is below this are checked against its mesh:
+the fields are ~1-2 mm off (DESIGN.md section 3), and a triangle can cross a mesh only if one of its
+vertices is within an edge length (~1.2 cm) of it."""
+
+
+@dataclass
+class Inner:
+    """An inner layer as one outer layer sees it."""
+
+    mesh: ClosestPoint  # its final world-space mesh
+    closed: bool  # the body: inside is inside, at any depth
+    near: np.ndarray  # (V,) bool: outer vertices that may come within reach of it (others never move)
+    covered: np.ndarray  # (V,) bool: outer vertices it covers (its h < 0 there); all for the body
 
 
 @dataclass(frozen=True)
@@ -56,28 +66,18 @@ class RepairResult:
     log: list[dict] = field(default_factory=list)
 
 
-def _pushes(x, inner: ClosestPoint, margin: np.ndarray, band: float, closed: bool, covered):
-    """Target positions of the vertices ``x (V, 3)`` that violate ``margin (V,)`` against ``inner``:
+def _pushes(x: np.ndarray, inner: Inner, margin: np.ndarray, band: float):
+    """The vertices of ``x (V, 3)`` that violate ``margin (V,)`` against ``inner``, and where they go:
     (indices (K,), targets (K, 3))."""
-    reach = float(margin.max()) + max(band, 0.0)
-    tree = cKDTree(inner.vertices)
-    # A vertex farther than reach + the inner mesh's longest edge from every inner vertex is clear.
-    edges = inner.vertices[inner.faces] - inner.vertices[inner.faces[:, [1, 2, 0]]]
-    longest = float(np.linalg.norm(edges, axis=2).max())
-    d_vertex, _ = tree.query(x, distance_upper_bound=reach + longest)
-    near = np.flatnonzero(np.isfinite(d_vertex))
+    near = np.flatnonzero(inner.near)
     if not len(near):
         return near, np.zeros((0, 3))
-    q = inner.query(x[near])
-    limit = -np.inf if closed else -band
-    bad = (q.signed < margin[near]) & (q.signed > limit)
-    if not closed and bad.any():
-        bad[bad] = covered(near[bad])
+    q = inner.mesh.query(x[near])
+    inside = q.signed < 0
+    bad = (q.signed < margin[near]) & (inner.closed | ~inside | ((q.signed > -band) & inner.covered[near]))
     idx = near[bad]
-    normal = q.normal[bad]
     # Out along the face normal from the closest point, to the margin.
-    target = q.point[bad] + margin[idx, None] * normal
-    return idx, target
+    return idx, q.point[bad] + margin[idx, None] * q.normal[bad]
 
 
 def _diffuse(u: np.ndarray, held: np.ndarray, region: np.ndarray, adjacency, iterations: int) -> np.ndarray:
@@ -93,27 +93,24 @@ def _diffuse(u: np.ndarray, held: np.ndarray, region: np.ndarray, adjacency, ite
 
 
 def repair_layer(
-    vertices: np.ndarray,
-    faces: np.ndarray,
-    inner: list[tuple[ClosestPoint, bool]],
-    covers: Covers,
-    settings: RepairSettings = RepairSettings(),
+    vertices: np.ndarray, faces: np.ndarray, inner: list[Inner], settings: RepairSettings = RepairSettings()
 ) -> RepairResult:
-    """Repair one layer ``vertices (V, 3)``, ``faces (F, 3)`` against its ``inner`` layers, each a
-    (closest-point structure, closed) pair; ``covers(j, idx)`` says where inner layer j covers."""
+    """Repair one layer ``vertices (V, 3)``, ``faces (F, 3)`` against its final ``inner`` layers."""
     x = np.asarray(vertices, dtype=np.float64).copy()
     faces = np.asarray(faces)
     adjacency = vertex_neighbours(faces, len(x))
     margin = np.full(len(x), settings.margin)
     moved = np.zeros(len(x), dtype=bool)
+    # Only triangles with a vertex near an inner layer can cross it.
+    tested = [np.flatnonzero(layer.near[faces].any(axis=1)) for layer in inner]
     log = []
     crossing, rounds = 0, 0
     while rounds < settings.rounds:
         rounds += 1
         held = np.zeros(len(x), dtype=bool)
         u = np.zeros_like(x)
-        for j, (mesh, closed) in enumerate(inner):
-            idx, target = _pushes(x + u, mesh, margin, settings.band, closed, lambda i, j=j: covers(j, i))
+        for layer in inner:
+            idx, target = _pushes(x + u, layer, margin, settings.band)
             u[idx] = target - x[idx]
             held[idx] = True
         if held.any():
@@ -122,14 +119,13 @@ def repair_layer(
             x += u
             moved |= np.linalg.norm(u, axis=1) > 0
         crossing, culprits = 0, []
-        for mesh, _ in inner:
-            pairs = intersecting_pairs(x, faces, mesh.vertices, mesh.faces)
+        for layer, t in zip(inner, tested, strict=True):
+            pairs = intersecting_pairs(x, faces[t], layer.mesh.vertices, layer.mesh.faces)
             crossing += len(pairs)
-            culprits.append(faces[pairs[:, 0]].ravel())
+            culprits.append(faces[t][pairs[:, 0]].ravel())
         log.append({"pushed": int(held.sum()), "crossing_pairs": crossing})
         if crossing == 0 and not held.any():
             break
         if crossing:
-            worse = np.unique(np.concatenate(culprits))
-            margin[worse] *= 2
+            margin[np.unique(np.concatenate(culprits))] *= 2
     return RepairResult(x, moved, rounds, crossing, log)

@@ -1,0 +1,66 @@
+"""The exact collision repair (service.repair) on hand-made layers with known answers."""
+
+from __future__ import annotations
+
+import numpy as np
+import trimesh
+
+from service.closest import ClosestPoint
+from service.intersections import intersecting_pairs
+from service.repair import Inner, RepairSettings, repair_layer
+from tests.meshes import grid_mesh
+
+
+def _sheet(n: int, size: float, z):
+    v, f = grid_mesh(n)
+    v = (v - [0.5, 0.5, 0]) * [size, size, 0]
+    v[:, 2] = z(v)
+    return v, f
+
+
+def _everywhere(n: int) -> np.ndarray:
+    return np.ones(n, dtype=bool)
+
+
+def test_a_sheet_crossing_an_inner_sheet_is_lifted_above_it_and_only_there():
+    inner_v, inner_f = _sheet(20, 0.4, lambda v: 0.0 * v[:, 0])
+    # The outer sheet lies 1 cm above but dips 6 mm through the inner one in a 3 cm wide dent.
+    outer_v, outer_f = _sheet(
+        24, 0.36, lambda v: 0.01 - 0.016 * np.exp(-(v[:, 0] ** 2 + v[:, 1] ** 2) / 0.03**2)
+    )
+    assert len(intersecting_pairs(outer_v, outer_f, inner_v, inner_f)) > 0
+    n = len(outer_v)
+    inner = [Inner(ClosestPoint.build(inner_v, inner_f), False, _everywhere(n), _everywhere(n))]
+    settings = RepairSettings()
+    r = repair_layer(outer_v, outer_f, inner, settings)
+    assert r.crossing_pairs == 0
+    assert len(intersecting_pairs(r.vertices, outer_f, inner_v, inner_f)) == 0
+    assert r.vertices[:, 2].min() >= settings.margin - 1e-9
+    # Vertices far from the dent (over 8 cm from its centre) never move.
+    far = np.linalg.norm(outer_v[:, :2], axis=1) > 0.08
+    np.testing.assert_array_equal(r.vertices[far], outer_v[far])
+    assert r.moved.any() and not r.moved[far].any()
+
+
+def test_an_uncovered_inner_layer_leaves_the_vertices_below_it_alone():
+    inner_v, inner_f = _sheet(10, 0.4, lambda v: 0.0 * v[:, 0])
+    outer_v, outer_f = _sheet(8, 0.1, lambda v: -0.01 + 0.0 * v[:, 0])  # 1 cm below, no crossing
+    n = len(outer_v)
+    covered = Inner(ClosestPoint.build(inner_v, inner_f), False, _everywhere(n), _everywhere(n))
+    r = repair_layer(outer_v, outer_f, [covered])
+    assert r.vertices[:, 2].min() > 0  # on the wrong side of a covering layer: moved out
+    open_layer = Inner(covered.mesh, False, _everywhere(n), np.zeros(n, dtype=bool))
+    r = repair_layer(outer_v, outer_f, [open_layer])
+    np.testing.assert_array_equal(r.vertices, outer_v)  # beyond its opening: nothing to do
+
+
+def test_nothing_ends_inside_a_closed_body():
+    body = trimesh.creation.icosphere(subdivisions=4, radius=0.1)
+    # A sheet cutting 3 cm deep into the sphere of radius 10 cm.
+    v, f = _sheet(30, 0.3, lambda v: 0.07 + 0.0 * v[:, 0])
+    n = len(v)
+    inner = [Inner(ClosestPoint.build(body.vertices, body.faces), True, _everywhere(n), _everywhere(n))]
+    r = repair_layer(v, f, inner, RepairSettings(rounds=10))
+    assert r.crossing_pairs == 0
+    assert np.linalg.norm(r.vertices, axis=1).min() >= 0.1 + RepairSettings().margin - 2e-4
+    assert len(intersecting_pairs(r.vertices, f, body.vertices, body.faces)) == 0
