@@ -4,7 +4,7 @@
 # made here with debootstrap. Then start the container read-only, wait for /readyz and print the
 # build time, the image size and the readiness answer. See docker/README.md.
 #
-#   apt-get install -y buildah podman debootstrap      # once, as root
+#   apt-get install -y buildah podman runc debootstrap      # once, as root
 #   docker/build.sh                                     # from anywhere in the repository
 #
 # Environment (defaults): WORK=build/container (storage, rootfs, logs; git-ignored),
@@ -23,7 +23,7 @@ READY_TIMEOUT=${READY_TIMEOUT:-300}
 NAME=ulnef-smoke
 STORE=(--root "$WORK/storage" --runroot "$WORK/run" --storage-driver vfs)
 
-for tool in buildah podman debootstrap; do
+for tool in buildah podman runc debootstrap; do
     command -v "$tool" >/dev/null || { echo "build.sh: $tool missing (apt-get install -y $tool)" >&2; exit 1; }
 done
 
@@ -74,8 +74,8 @@ echo "image: $IMAGE built $build_s, $(awk -v s="$size" 'BEGIN {printf "%.0f MB",
 
 # 3. Run it as compose/Kubernetes would: read-only root, tmpfs /tmp, no capabilities. Host network
 #    with the server bound to 127.0.0.1 (no bridge or iptables needed inside a sandbox); explicit
-#    rlimits no higher than the caller's (with every capability dropped, runc cannot raise them); no systemd timer for the health check
-#    (it is run once below instead).
+#    rlimits no higher than the caller's (with every capability dropped, runc cannot raise them);
+#    no systemd timer for the health check (it is run once below instead).
 podman "${STORE[@]}" rm -f "$NAME" >/dev/null 2>&1 || true
 t0=$(date +%s)
 podman "${STORE[@]}" run --runtime runc --detach --name "$NAME" --network host \
@@ -115,7 +115,7 @@ PY
 ) || { podman "${STORE[@]}" logs --tail 20 "$NAME" >&2; echo "build.sh: POST /v1/outfits failed" >&2; exit 1; }
 echo "run: POST /v1/outfits pants,tshirt (cold): $outfit"
 pid=$(podman "${STORE[@]}" inspect --format '{{.State.Pid}}' "$NAME")
-echo "run: server RSS $(awk '/VmRSS/ {printf "%.0f MB", $2/1024}' "/proc/$pid/status")"
+echo "run: server RSS $(awk '/VmRSS/ {printf "%.0f MB", $2 * 1024 / 1e6}' "/proc/$pid/status")"
 if [[ ${KEEP_RUNNING:-0} == 1 ]]; then
     echo "left running on 127.0.0.1:$PORT; stop: podman ${STORE[*]} rm -f $NAME"
 fi
