@@ -167,6 +167,11 @@ def make_requests(
 # ---------------------------------------------------------------- client and statistics
 
 
+# Answers that mean "overloaded or out of time, retry later" (with Retry-After), not a fault.
+REJECTED = frozenset({429, 503, 504})
+MAX_BACKOFF_S = 5.0
+
+
 @dataclass(frozen=True)
 class Result:
     n_garments: int
@@ -174,6 +179,17 @@ class Result:
     status: int  # HTTP status; 0 when no answer came (timeout, connection error)
     cached: bool | None = None
     error: str | None = None
+    retry_after_s: float | None = None
+
+    @property
+    def rejected(self) -> bool:
+        return self.status in REJECTED
+
+
+async def back_off(result: Result) -> None:
+    """A polite client: after a rejection, wait what Retry-After says (at most MAX_BACKOFF_S)."""
+    if result.rejected:
+        await asyncio.sleep(min(result.retry_after_s or 1.0, MAX_BACKOFF_S))
 
 
 async def post_outfit(client: httpx.AsyncClient, url: str, request: dict, glb: bool) -> Result:
@@ -186,7 +202,9 @@ async def post_outfit(client: httpx.AsyncClient, url: str, request: dict, glb: b
         return Result(n, time.perf_counter() - t0, 0, error=type(e).__name__)
     seconds = time.perf_counter() - t0
     if response.status_code != 200:
-        return Result(n, seconds, response.status_code, error=response.text[:200])
+        retry = response.headers.get("Retry-After", "")
+        retry_s = float(retry) if retry.replace(".", "", 1).isdigit() else None
+        return Result(n, seconds, response.status_code, error=response.text[:200], retry_after_s=retry_s)
     if glb:
         ok = response.content[:4] == b"glTF"
         return Result(n, seconds, 200 if ok else -1, error=None if ok else "answer is not a GLB")
@@ -205,6 +223,7 @@ async def run_requests(
     async def client_loop(client: httpx.AsyncClient) -> None:
         while queue and time.perf_counter() - t0 < max_seconds:
             results.append(await post_outfit(client, url, queue.pop(), glb))
+            await back_off(results[-1])
 
     limits = httpx.Limits(max_connections=concurrency)
     async with httpx.AsyncClient(timeout=timeout_s, limits=limits) as client:
@@ -216,7 +235,8 @@ async def run_requests(
 class Stats:
     sent: int
     ok: int
-    errors: int
+    rejected: int  # 429/503/504: overload or deadline, answered with Retry-After
+    errors: int  # every other failure: 4xx/5xx, no answer, not a GLB
     p50_ms: float
     p95_ms: float
     p99_ms: float
@@ -229,8 +249,10 @@ class Stats:
         p50, p95, p99 = np.percentile(ok, (50, 95, 99)) if ok else (float("nan"),) * 3
         failed = Counter(r.status for r in results if r.status != 200)
         statuses = ", ".join(f"{s}x{n}" for s, n in sorted(failed.items()))
-        return cls(len(results), len(ok), len(results) - len(ok), float(p50), float(p95), float(p99),
-                   len(ok) / wall_s if wall_s > 0 else float("nan"), statuses)  # fmt: skip
+        rejected = sum(r.rejected for r in results)
+        return cls(len(results), len(ok), rejected, len(results) - len(ok) - rejected,
+                   float(p50), float(p95), float(p99), len(ok) / wall_s if wall_s > 0 else float("nan"),
+                   statuses)  # fmt: skip
 
 
 def format_table(header: Sequence[str], rows: Sequence[Sequence[object]]) -> str:

@@ -7,11 +7,16 @@ and evicts during the warm-up)::
     python -m benchmarks.soak --url http://127.0.0.1:8000 --pid PID     # a running server
 
 The load is half cold requests (a new body shape each) and half repeats from a pool of earlier
-ones, 1-4 garments (see benchmarks.load). RSS (the server process and its children, /proc) is
-sampled every ``--sample-seconds``. Bound: the RSS at the end may exceed the RSS at the end of the
-warm-up (the first ``--warmup-fraction`` of the run) by at most ``--max-growth-mb``; the command
-exits 1 otherwise, or when any request failed. Bounded: it stops after ``--minutes``, or after
-``--max-requests``, whichever comes first.
+ones, 1-4 garments (see benchmarks.load); after a 429/503/504 a client waits what Retry-After says
+(at most 5 s). RSS (the server process and its children, /proc) is sampled every
+``--sample-seconds`` for the table. The load runs in two phases, the warm-up (the first
+``--warmup-fraction`` of the time) and the rest; after each, once every answer is in, the load pauses
+``--settle-seconds`` and the idle RSS is read, so that no outfit in flight counts as growth.
+
+Bound: the idle RSS at the end may exceed the idle RSS after the warm-up by at most
+``--max-growth-mb``. Exits 1 otherwise, or when any request failed other than rejected (429/503/504,
+the service's answers to overload and deadlines). Bounded: it stops after ``--minutes`` (plus the
+settling and the answers in flight), or after ``--max-requests``.
 """
 
 from __future__ import annotations
@@ -30,6 +35,7 @@ from benchmarks.loadgen import (
     LocalServer,
     Result,
     Stats,
+    back_off,
     check_loopback,
     fetch_catalog,
     format_table,
@@ -42,56 +48,57 @@ from service.body import BodyModel
 # The soak's own server: a cache small enough to fill (and evict) during the warm-up.
 SOAK_SERVER_ENV = {"ULNEF_CACHE_ENTRIES": "8"}
 MAX_MINUTES = 240.0
+SAMPLE_HEADER = ("t s", "RSS MB", "peak MB", "requests", "ok", "rejected", "errors")
+PHASES = ("warm-up", "end")
 
 
-async def soak(url: str, pid: int | None, args: argparse.Namespace) -> tuple[list[Result], list[tuple]]:
+async def soak(url: str, pid: int | None, args: argparse.Namespace) -> tuple[list[Result], list[tuple], dict]:
+    """Returns the results, the RSS samples (SAMPLE_HEADER rows) and the idle RSS (MB) after each phase."""
     rng = np.random.default_rng(args.seed)
     catalog, body = fetch_catalog(url), BodyModel.load()
-    sizes = list(range(1, MAX_GARMENTS + 1))
-    pool = make_requests(rng, catalog, body, args.pool, sizes)
+    pool = make_requests(rng, catalog, body, args.pool, list(range(1, MAX_GARMENTS + 1)))
     results: list[Result] = []
-    samples: list[tuple] = []  # (seconds, rss MB, peak MB, requests done, errors)
+    samples: list[tuple] = []
+    idle: dict[str, float] = {}
     t0 = time.perf_counter()
-    end = t0 + args.minutes * 60
+
+    def sample() -> tuple:
+        rss, peak = rss_mb(pid) if pid else (float("nan"), float("nan"))
+        ok = sum(r.status == 200 for r in results)
+        rejected = sum(r.rejected for r in results)
+        return (time.perf_counter() - t0, rss, peak, len(results), ok, rejected, len(results) - ok - rejected)
 
     def next_request() -> dict:
         if rng.random() < 0.5:
             return pool[int(rng.integers(0, len(pool)))]
         return make_requests(rng, catalog, body, 1, [int(rng.integers(1, MAX_GARMENTS + 1))])[0]
 
-    async def client_loop(client: httpx.AsyncClient) -> None:
-        while time.perf_counter() < end and len(results) < args.max_requests:
+    async def client_loop(client: httpx.AsyncClient, until_s: float) -> None:
+        while time.perf_counter() - t0 < until_s and len(results) < args.max_requests:
             results.append(await post_outfit(client, url, next_request(), glb=False))
+            await back_off(results[-1])
 
     async def sampler() -> None:
         while True:
-            rss, peak = rss_mb(pid) if pid else (float("nan"), float("nan"))
-            errors = sum(r.status != 200 for r in results)
-            samples.append((time.perf_counter() - t0, rss, peak, len(results), errors))
+            samples.append(sample())
             print(format_table(SAMPLE_HEADER, [samples[-1]]).splitlines()[-1], flush=True)
             await asyncio.sleep(args.sample_seconds)
 
     limits = httpx.Limits(max_connections=args.concurrency)
     async with httpx.AsyncClient(timeout=args.timeout, limits=limits) as client:
         sampling = asyncio.create_task(sampler())
-        await asyncio.gather(*(client_loop(client) for _ in range(args.concurrency)))
+        total_s = args.minutes * 60
+        for phase, until_s in zip(PHASES, (args.warmup_fraction * total_s, total_s), strict=True):
+            await asyncio.gather(*(client_loop(client, until_s) for _ in range(args.concurrency)))
+            # Every answer is in; an outfit that ran past its deadline may still be finishing.
+            await asyncio.sleep(args.settle_seconds)
+            idle[phase] = sample()[1]
+            print(f"idle RSS after the {phase}: {idle[phase]:.0f} MB", flush=True)
         sampling.cancel()
         with contextlib.suppress(asyncio.CancelledError):
             await sampling
-    rss, peak = rss_mb(pid) if pid else (float("nan"), float("nan"))
-    samples.append((time.perf_counter() - t0, rss, peak, len(results), sum(r.status != 200 for r in results)))
-    return results, samples
-
-
-SAMPLE_HEADER = ("t s", "RSS MB", "peak MB", "requests", "errors")
-
-
-def growth_mb(samples: list[tuple], warmup_fraction: float) -> tuple[float, float]:
-    """(RSS at the end of the warm-up, growth after it) in MB."""
-    total = samples[-1][0]
-    after = [s for s in samples if s[0] >= warmup_fraction * total]
-    baseline = after[0][1]
-    return baseline, samples[-1][1] - baseline
+    samples.append(sample())
+    return results, samples, idle
 
 
 def parse_args(argv=None) -> argparse.Namespace:
@@ -106,6 +113,8 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser.add_argument("--pool", type=int, default=8, help="distinct repeated requests (%(default)s)")
     parser.add_argument("--sample-seconds", type=float, default=10.0, help="(%(default)s)")
     parser.add_argument("--warmup-fraction", type=float, default=0.25, help="(%(default)s)")
+    parser.add_argument("--settle-seconds", type=float, default=15.0,
+                        help="idle time before each idle RSS reading (%(default)s)")  # fmt: skip
     parser.add_argument("--max-growth-mb", type=float, default=64.0, help="(%(default)s)")
     parser.add_argument("--timeout", type=float, default=120.0, help="per request, seconds (%(default)s)")
     parser.add_argument("--seed", type=int, default=1)
@@ -114,6 +123,8 @@ def parse_args(argv=None) -> argparse.Namespace:
     args = parser.parse_args(argv)
     if not 0 < args.minutes <= MAX_MINUTES:
         parser.error(f"--minutes must be in (0, {MAX_MINUTES:g}]")
+    if not 0 < args.warmup_fraction < 1:
+        parser.error("--warmup-fraction must be in (0, 1)")
     if args.concurrency < 1 or args.pool < 1 or args.max_requests < 1 or args.sample_seconds <= 0:
         parser.error("--concurrency, --pool, --max-requests and --sample-seconds must be positive")
     return args
@@ -130,19 +141,20 @@ def main(argv=None) -> int:
             url, pid = server.url, server.process.pid
             print(f"server: {url}, ready in {server.startup_s:.1f} s, env {env}", flush=True)
         print(format_table(SAMPLE_HEADER, []), flush=True)
-        results, samples = asyncio.run(soak(url, pid, args))
+        results, samples, idle = asyncio.run(soak(url, pid, args))
     stats = Stats.of(results, samples[-1][0])
     print()
-    print(format_table(("requests", "ok", "errors", "p50 ms", "p95 ms", "p99 ms", "req/s", "failures"),
-                       [[stats.sent, stats.ok, stats.errors, stats.p50_ms, stats.p95_ms, stats.p99_ms,
-                         stats.throughput, stats.statuses or "-"]]))  # fmt: skip
+    header = ("requests", "ok", "rejected", "errors", "p50 ms", "p95 ms", "p99 ms", "req/s", "failures")
+    row = [stats.sent, stats.ok, stats.rejected, stats.errors, stats.p50_ms, stats.p95_ms, stats.p99_ms,
+           stats.throughput, stats.statuses or "-"]  # fmt: skip
+    print(format_table(header, [row]))
     failed = stats.errors > 0
     if pid:
-        baseline, growth = growth_mb(samples, args.warmup_fraction)
+        growth = idle["end"] - idle["warm-up"]
         verdict = "ok" if growth <= args.max_growth_mb else "FAIL"
-        peak = max(s[2] for s in samples)
-        print(f"\nRSS after warm-up {baseline:.0f} MB, at the end {samples[-1][1]:.0f} MB, "
-              f"growth {growth:+.0f} MB (bound {args.max_growth_mb:g} MB): {verdict}; peak {peak:.0f} MB")
+        print(f"\nidle RSS after the warm-up {idle['warm-up']:.0f} MB, at the end {idle['end']:.0f} MB: "
+              f"growth {growth:+.0f} MB (bound {args.max_growth_mb:g} MB): {verdict}; "
+              f"peak {max(s[2] for s in samples):.0f} MB")  # fmt: skip
         failed |= verdict != "ok"
     return 1 if failed else 0
 

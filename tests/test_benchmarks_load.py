@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import asyncio
+
 import numpy as np
 import pytest
 
@@ -9,12 +11,12 @@ from benchmarks.loadgen import (
     Catalog,
     Result,
     Stats,
+    back_off,
     check_loopback,
     make_requests,
     random_body,
 )
 from benchmarks.memory import covering_outfits
-from benchmarks.soak import growth_mb
 from service.body import BodyModel, shape_from_measurements
 
 LISTING = {"garments": [
@@ -96,12 +98,19 @@ def test_stats_percentiles_throughput_and_failures():
     ok = [Result(1, s / 1000, 200) for s in range(1, 101)]
     failed = [Result(2, 0.5, 503), Result(2, 0.5, 503), Result(1, 9.0, 0, error="ReadTimeout")]
     stats = Stats.of(ok + failed, wall_s=10.0)
-    assert (stats.sent, stats.ok, stats.errors) == (103, 100, 3)
+    assert (stats.sent, stats.ok, stats.rejected, stats.errors) == (103, 100, 2, 1)
     assert stats.p50_ms == pytest.approx(50.5) and stats.p99_ms == pytest.approx(99.01)
     assert stats.throughput == pytest.approx(10.0) and stats.statuses == "0x1, 503x2"
 
 
-def test_growth_is_measured_from_the_end_of_the_warm_up():
-    samples = [(t, rss, rss, 0, 0) for t, rss in [(0, 100), (10, 300), (20, 310), (30, 305), (40, 330)]]
-    assert growth_mb(samples, warmup_fraction=0.25) == (300, 30)
-    assert growth_mb(samples, warmup_fraction=0.3) == (310, 20)
+def test_back_off_waits_what_retry_after_says_at_most_five_seconds(monkeypatch):
+    slept = []
+
+    async def fake_sleep(seconds):
+        slept.append(seconds)
+
+    monkeypatch.setattr("benchmarks.loadgen.asyncio.sleep", fake_sleep)
+    for result in (Result(1, 0.1, 503, retry_after_s=2.0), Result(1, 0.1, 429, retry_after_s=60.0),
+                   Result(1, 0.1, 504), Result(1, 0.1, 200), Result(1, 0.1, 422)):
+        asyncio.run(back_off(result))
+    assert slept == [2.0, 5.0, 1.0]
