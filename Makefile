@@ -25,6 +25,7 @@ test: $(VENV)/.installed-test $(JS_DIR)/node_modules/.installed chromium
 # step resumes where it stopped (data/drapes, build/*.ckpt, build/fields); delete them to redo.
 models: $(VENV)/.installed-test
 	$(BIN)/python -m export.body
+	$(BIN)/python -m export.body_sdf
 	$(BIN)/python -m training.garments
 	$(BIN)/python -m training.drape
 	$(BIN)/python -m training.explicit

@@ -215,3 +215,13 @@ class ClosestPoint:
         return _finish(
             points, self.vertices, self.faces, self.fn, cand[rows, best], w[rows, best], self.pseudo
         )
+
+
+def signed_distance(closest: ClosestPoint, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(signed distance (P,), its gradient (P, 3)) to a closed mesh at ``x (P, 3)``: the unit vector
+    from the closest point, or the face normal on the surface itself."""
+    c = closest.query(x)
+    far = c.distance > 1e-9
+    sign = np.where(c.signed < 0, -1.0, 1.0)[:, None]
+    away = (x - c.point) / np.where(far, c.distance, 1.0)[:, None]
+    return c.signed, np.where(far[:, None], sign * away, c.normal)

@@ -61,7 +61,14 @@ def _session(path: Path, threads: int):
     options = ort.SessionOptions()
     options.intra_op_num_threads = threads
     options.inter_op_num_threads = 1
+    # onnxruntime's CPU arena keeps each session's largest batch for ever: 15 sessions held ~600 MB
+    # after one outfit of every garment (benchmarks/memory.py). Without it, freed buffers go back to
+    # malloc, which every session shares.
+    options.enable_cpu_mem_arena = False
     return ort.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
+
+
+BATCH = 8192  # points per onnxruntime call
 
 
 class NeuralField:
@@ -79,12 +86,15 @@ class NeuralField:
         if x.ndim != 2 or x.shape[1] != 3:
             raise ValueError(f"x must be (P, 3), got {x.shape}")
         beta = np.asarray(beta, dtype=np.float32).reshape(1, 3)
-        feeds = dict(zip(INPUT_NAMES, (x, beta), strict=True))
-        if not gradient:
-            f, h = self._values.run(list(VALUE_NAMES), feeds)
-            return FieldValues(f.astype(np.float64), h.astype(np.float64), None, None)
-        f, h, gf, gh = self._gradient.run(list(GRADIENT_NAMES), feeds)
-        return FieldValues(*(a.astype(np.float64) for a in (f, h, gf, gh)))
+        session, names = (self._gradient, GRADIENT_NAMES) if gradient else (self._values, VALUE_NAMES)
+        # Bounded batches bound the activations' memory (a jacket's 10k vertices with gradients
+        # would otherwise take ~100 MB at once); the per-call overhead is ~0.1 ms.
+        parts = [
+            session.run(list(names), dict(zip(INPUT_NAMES, (x[s : s + BATCH], beta), strict=True)))
+            for s in range(0, max(len(x), 1), BATCH)
+        ]
+        out = [np.concatenate([p[k] for p in parts]).astype(np.float64) for k in range(len(names))]
+        return FieldValues(*out) if gradient else FieldValues(out[0], out[1], None, None)
 
 
 class FieldSet:

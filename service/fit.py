@@ -46,9 +46,9 @@ class FitSettings:
     """m: a vertex whose untangled field is this far from its target is optimised."""
     ring: int = 2
     """Rings of neighbours optimised with the conflicting vertices."""
-    outer: int = 4
+    outer: int = 3
     """Linearisations of the fields (each followed by an L-BFGS run)."""
-    inner: int = 80
+    inner: int = 30
     """L-BFGS-B iterations per linearisation."""
     trust: float = 0.01
     """m: longest Newton step a vertex starts its L-BFGS from."""

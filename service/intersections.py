@@ -48,16 +48,13 @@ def candidate_pairs(va, fa, vb, fb) -> np.ndarray:
     ca, cb = ta.mean(axis=1), tb.mean(axis=1)
     ra = np.linalg.norm(ta - ca[:, None], axis=2).max(axis=1)
     rb = np.linalg.norm(tb - cb[:, None], axis=2).max(axis=1)
-    # Query the tree of the mesh with the smaller largest triangle, with per-triangle radii of the
-    # other, so that one big triangle does not blow up every query.
-    swap = ra.max() > rb.max()
-    if swap:
-        ca, cb, ra, rb = cb, ca, rb, ra
-    lists = cKDTree(ca).query_ball_point(cb, r=rb + ra.max())
-    j = np.repeat(np.arange(len(lists)), [len(x) for x in lists])
-    i = np.concatenate([np.asarray(x, dtype=np.int64) for x in lists]) if len(j) else j
-    if swap:
-        i, j = j, i
+    # Centroid pairs closer than the two largest circumradii, as one array (query_ball_point's
+    # per-point Python lists cost more than the tests); the bounding boxes then prune them.
+    radius = float(ra.max() + rb.max())
+    pairs = cKDTree(ca).sparse_distance_matrix(cKDTree(cb), radius, output_type="ndarray")
+    i, j = pairs["i"].astype(np.int64), pairs["j"].astype(np.int64)
+    keep = np.linalg.norm(ca[i] - cb[j], axis=1) <= ra[i] + rb[j]
+    i, j = i[keep], j[keep]
     lo_a, hi_a, lo_b, hi_b = ta.min(1), ta.max(1), tb.min(1), tb.max(1)
     overlap = np.all((lo_a[i] <= hi_b[j]) & (lo_b[j] <= hi_a[i]), axis=1)
     return np.stack([i[overlap], j[overlap]], axis=1)

@@ -20,8 +20,8 @@ import logging
 log = logging.getLogger(__name__)
 
 M_TRIM_THRESHOLD, M_TOP_PAD, M_MMAP_THRESHOLD = -1, -2, -3  # glibc malloc.h
-MMAP_THRESHOLD = 32 << 20  # bytes: blocks up to this size stay in the heap when freed
-TRIM_THRESHOLD = 128 << 20  # bytes of free heap top kept instead of returned to the kernel
+MMAP_THRESHOLD = 4 << 20  # bytes: blocks up to this size stay in the heap when freed
+TRIM_THRESHOLD = 32 << 20  # bytes of free heap top kept instead of returned to the kernel
 _tuned = {"done": False, "limits": None}
 
 
@@ -40,7 +40,7 @@ def tune_process(blas_threads: int = 1) -> dict[str, bool]:
         applied["malloc"] = all(
             mallopt(param, value) == 1
             for param, value in ((M_MMAP_THRESHOLD, MMAP_THRESHOLD), (M_TRIM_THRESHOLD, TRIM_THRESHOLD),
-                                 (M_TOP_PAD, 16 << 20))
+                                 (M_TOP_PAD, 4 << 20))
         )  # fmt: skip
     try:
         from threadpoolctl import threadpool_limits

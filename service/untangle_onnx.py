@@ -69,6 +69,7 @@ class NeuralUntangler:
         options = ort.SessionOptions()
         options.intra_op_num_threads = threads
         options.inter_op_num_threads = 1
+        options.enable_cpu_mem_arena = False  # as the fields' sessions (service.fields._session)
         self._values, self._jacobian = (
             ort.InferenceSession(str(directory / name), options, providers=["CPUExecutionProvider"])
             for name in (VALUES_FILE, JACOBIAN_FILE)

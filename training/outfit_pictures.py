@@ -37,7 +37,7 @@ def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--out", type=Path, default=REPO_ROOT / "docs" / "images")
     parser.add_argument("--size", type=int, default=360)
-    parser.add_argument("--untangler", choices=("neural", "reference"), default="reference")
+    parser.add_argument("--untangler", choices=("neural", "reference"), default="neural")
     args = parser.parse_args(argv)
     models = OutfitModels.load()
     beta = sample_betas(2, 3)[1]
