@@ -193,19 +193,24 @@ def _repair(models, layer_ids, beta, body, fitted, world, faces, settings: Repai
     """Repaired world meshes and their ``RepairResult``s, each layer against the final inner ones.
 
     Which vertices can be near an inner layer, and where it covers them, comes from the fields at the
-    layer's fitted canonical vertices (values only; the learned body field is enough for that)."""
-    inner = [(ClosestPoint.build(body, models.body.faces), True, BODY)]
+    layer's fitted canonical vertices (values only; the learned body field is enough for that). The
+    fields are those of the explicit meshes: an inner garment that its fit and repair moved by up to
+    s is looked for within ``REACH`` + s."""
+    inner = [(ClosestPoint.build(body, models.body.faces), True, BODY, 0.0)]
     out, results = [], []
     for i, (x, f) in enumerate(zip(world, faces, strict=True)):
         layers = []
-        for mesh, closed, field_id in inner:
+        for mesh, closed, field_id, moved in inner:
             v = models.fields(field_id, fitted[i], beta)
-            near = v.f < REACH if closed else np.abs(v.f) < REACH
+            reach = REACH + moved
+            near = v.f < reach if closed else np.abs(v.f) < reach
             layers.append(Inner(mesh, closed, near, v.h < 0))
         r = repair_layer(x, f, layers, settings)
         out.append(r.vertices if np.all(np.isfinite(r.vertices)) else x)
         results.append(r)
-        inner.append((ClosestPoint.build(out[-1], f), False, layer_ids[i + 1]))
+        explicit_world = models.space.to_body(models.explicit[layer_ids[i + 1]].canonical(beta), body)
+        moved = float(np.linalg.norm(out[-1] - explicit_world, axis=1).max())
+        inner.append((ClosestPoint.build(out[-1], f), False, layer_ids[i + 1], moved))
     return out, results
 
 

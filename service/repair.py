@@ -12,7 +12,8 @@ the body outwards (inner layers are final when an outer one is repaired):
 2. The displacement spreads over ``ring`` rings of neighbours (Laplacian diffusion with the moved
    vertices held), so a push lifts a patch instead of a spike.
 3. Exact edge-triangle tests find the triangle pairs still crossing (an inner bump poking between
-   outer vertices); their outer vertices get twice the margin, and the loop repeats.
+   outer vertices); their outer vertices get a larger margin (``growth``, up to ``max_margin``),
+   and the loop repeats.
 
 Everything is local to the vertices that the fields place within ``REACH`` of an inner layer (the
 caller's ``Inner.near``): most vertices are far from every inner layer and are never queried.
@@ -52,7 +53,11 @@ class RepairSettings:
     band: float = PENETRATION_BAND
     """m: how deep inside an inner garment a vertex counts as having crossed it."""
     ring: int = 2
-    rounds: int = 6
+    rounds: int = 10
+    growth: float = 1.5
+    """Factor on the margin of the vertices of triangles still crossing after a round."""
+    max_margin: float = 0.008
+    """m: the margin never grows beyond this (larger pushes around fingers made new crossings)."""
     smoothing: int = 8
     """Jacobi iterations of the displacement diffusion per round."""
 
@@ -66,9 +71,11 @@ class RepairResult:
     log: list[dict] = field(default_factory=list)
 
 
-def _pushes(x: np.ndarray, inner: Inner, margin: np.ndarray, band: float):
+def _pushes(x: np.ndarray, inner: Inner, margin: np.ndarray, band: float, forced: np.ndarray):
     """The vertices of ``x (V, 3)`` that violate ``margin (V,)`` against ``inner``, and where they go:
-    (indices (K,), targets (K, 3))."""
+    (indices (K,), targets (K, 3)). ``forced (V,)`` marks vertices of crossing triangles: inside the
+    inner layer they move out even where its covariant field says it does not cover them (a T-shirt's
+    hem poking through the pants it is tucked into)."""
     near = np.flatnonzero(inner.near)
     if not len(near):
         return near, np.zeros((0, 3))
@@ -77,7 +84,8 @@ def _pushes(x: np.ndarray, inner: Inner, margin: np.ndarray, band: float):
     # A vertex pushed to the margin last round lands a rounding error short of it: 10 % slack stops
     # the loop from pushing it again and again by nothing.
     short = q.signed < 0.9 * margin[near]
-    bad = short & (inner.closed | ~inside | ((q.signed > -band) & inner.covered[near]))
+    covered = inner.covered[near] | forced[near]
+    bad = short & (inner.closed | ~inside | ((q.signed > -band) & covered))
     idx = near[bad]
     # Out along the face normal from the closest point, to the margin.
     return idx, q.point[bad] + margin[idx, None] * q.normal[bad]
@@ -104,6 +112,7 @@ def repair_layer(
     adjacency = vertex_neighbours(faces, len(x))
     margin = np.full(len(x), settings.margin)
     moved = np.zeros(len(x), dtype=bool)
+    forced = np.zeros(len(x), dtype=bool)
     # Only triangles with a vertex near an inner layer can cross it.
     tested = [np.flatnonzero(layer.near[faces].any(axis=1)) for layer in inner]
     log = []
@@ -113,7 +122,7 @@ def repair_layer(
         held = np.zeros(len(x), dtype=bool)
         u = np.zeros_like(x)
         for layer in inner:
-            idx, target = _pushes(x + u, layer, margin, settings.band)
+            idx, target = _pushes(x + u, layer, margin, settings.band, forced)
             u[idx] = target - x[idx]
             held[idx] = True
         if held.any():
@@ -130,5 +139,7 @@ def repair_layer(
         if crossing == 0 and not held.any():
             break
         if crossing:
-            margin[np.unique(np.concatenate(culprits))] *= 2
+            worse = np.unique(np.concatenate(culprits))
+            forced[worse] = True
+            margin[worse] = np.minimum(settings.growth * margin[worse], settings.max_margin)
     return RepairResult(x, moved, rounds, crossing, log)

@@ -20,6 +20,8 @@ import torch
 from service.body import DEFAULT_BETA, BodyModel
 from service.catalog import load_catalog
 from service.explicit import ExplicitModel
+from service.manifest import file_sha256
+from service.paths import models_dir
 from training.drape.dataset import sample_betas
 from training.fields.net import FieldConfig, FieldNet
 from training.fields.samples import (
@@ -58,10 +60,14 @@ class Surfaces:
         if field_id == BODY:
             self.template = Surface(self.body_vertices, self.body_faces, None)
             self.model = None
+            self.source = ""  # the mean body never changes
         else:
             g = load_catalog()[field_id]
             self.template = Surface(g.vertices, g.faces, g.openings)
             self.model = ExplicitModel.load(field_id, explicit_dir)
+            # Ground truth and checkpoints belong to one explicit model: a retrained one starts afresh.
+            path = Path(explicit_dir or models_dir() / "explicit") / f"{field_id}.npz"
+            self.source = file_sha256(path)[:12]
 
     def __call__(self, beta: np.ndarray) -> Surface:
         if self.model is None:
@@ -82,6 +88,7 @@ def training_data(surfaces: Surfaces, config: FieldConfig, log=print) -> dict[st
     """Cached ground truth over the training shapes: x, f, grad_f, h, grad_h (P, ...) float32, beta (P, 3)."""
     size = f"{config.n_betas}x{config.points_per_beta}"
     name = f"{surfaces.field_id}_{size}_s{config.seed}_v{GROUND_TRUTH_VERSION}"
+    name += f"_{surfaces.source}" if surfaces.source else ""
     path = DATA_DIR / f"{name}.npz"
     if path.exists():
         with np.load(path) as z:
@@ -144,12 +151,12 @@ def train_field(
     start, before = 0, 0.0
     if checkpoint.is_file():
         state = torch.load(checkpoint, weights_only=False)
-        if state["config"] == asdict(config):
+        if state["config"] == asdict(config) and state.get("source", "") == surfaces.source:
             net.load_state_dict(state["net"])
             opt.load_state_dict(state["opt"])
             start, before = state["step"], state["seconds"]
         else:
-            log(f"{checkpoint} holds another config; starting afresh")
+            log(f"{checkpoint} holds another config or explicit model; starting afresh")
     n_points = len(data["x"])
     end = config.steps if stop_at is None else min(stop_at, config.steps)
     t0 = time.perf_counter()
@@ -172,6 +179,7 @@ def train_field(
         if done % CHECKPOINT_EVERY == 0 or done == end:
             checkpoint.parent.mkdir(parents=True, exist_ok=True)
             state = {"config": asdict(config), "net": net.state_dict(), "opt": opt.state_dict()}
+            state["source"] = surfaces.source
             state.update(step=done, seconds=before + time.perf_counter() - t0)
             torch.save(state, checkpoint)
     bar.close()
