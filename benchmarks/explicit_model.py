@@ -7,7 +7,8 @@ Run (a few seconds, after ``make models`` or with the committed models and a bui
 - explicit-model error: mean / max distance in mm between the predicted garment (canonical
   prediction + diffused body displacement) and the simulated drape, per vertex, on the
   held-out shapes (never used in training); the training error beside it;
-- penetration: the deepest simulated vertex and the share of simulated vertices more than 1 mm
+- penetration: the smallest signed distance of any simulated vertex to the body ("min dist",
+  positive = outside, negative = inside) and the share of simulated vertices more than 1 mm
   inside the body, against the exact body surface (closest point on its triangles, not the
   simulator's own smoothed distance), over all shapes;
 - convergence: share of drapes that met the criterion of training/drape/solve.py within its
@@ -74,7 +75,7 @@ def main(argv=None) -> None:
     )
     header = (
         f"{'garment':<12} {'verts':>6} {'PCA':>4} {'test mean':>10} {'test max':>9} {'train mean':>11} "
-        f"{'deepest':>8} {'>1mm in':>8} {'converged':>10} {'iters':>6}"
+        f"{'min dist':>8} {'>1mm in':>8} {'converged':>10} {'iters':>6}"
     )
     print(header)
     print("-" * len(header))

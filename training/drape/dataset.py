@@ -25,6 +25,7 @@ from scipy.stats import qmc
 from service.body import DEFAULT_BETA, BodyModel
 from service.canonical import CanonicalSpace
 from service.catalog import Garment, load_catalog
+from service.closest import ClosestPoint
 from training.drape import energy
 from training.drape.solve import DrapeProblem, DrapeSettings, body_planes, drape, stick_to_skin
 
@@ -93,6 +94,7 @@ def drape_garment(
         planes, pinned, carried[pinned], settings,
     )  # fmt: skip
     result = drape(stick_to_skin(problem, carried), carried)
+    result.vertices = clear_of_body(result.vertices, ClosestPoint.build(body, faces))
     # Start the inversion from the template shifted by the drape: exact where nothing moved.
     canonical, _ = space.to_canonical(
         result.vertices, body, start=garment.vertices + (result.vertices - carried)
@@ -102,6 +104,51 @@ def drape_garment(
         result.vertices, canonical, result.iterations, result.converged, result.residual, depth,
         time.perf_counter() - t0, result.last_move,
     )  # fmt: skip
+
+
+CLEARANCE = 5e-4  # m
+
+
+def clear_of_body(world: np.ndarray, body: ClosestPoint, clearance: float = CLEARANCE) -> np.ndarray:
+    """``world (V, 3)`` with every vertex inside the exact body mesh moved out along the normal of its
+    closest body point to ``clearance``. The simulator sees the body through a smoothed distance
+    (``BodyPlanes``), which is up to ~3 mm off in the armpits and crotch, where a few vertices then
+    rest inside the true surface; this moves those (~0.001 % of the vertices) and nothing else."""
+    q = body.query(world)
+    inside = q.signed < 0
+    out = world.copy()
+    out[inside] = q.point[inside] + clearance * q.normal[inside]
+    return out
+
+
+def clear_dataset(out: Path = DEFAULT_DIR) -> int:
+    """Apply ``clear_of_body`` to every drape already on disk (canonical recomputed where it moved);
+    returns the number of vertices moved."""
+    model, catalog = BodyModel.load(), load_catalog()
+    space = CanonicalSpace.build(model.vertices(np.asarray(DEFAULT_BETA)), model.faces)
+    moved = 0
+    for path in sorted(Path(out).glob("*/[0-9][0-9][0-9].npz")):
+        with np.load(path) as z:
+            arrays = dict(z)
+        body = model.vertices(arrays["beta"])
+        closest = ClosestPoint.build(body, model.faces)
+        changed = False
+        for gid in catalog:
+            if f"{gid}/world" not in arrays:
+                continue
+            world = arrays[f"{gid}/world"].astype(np.float64)
+            fixed = clear_of_body(world, closest)
+            idx = np.flatnonzero(np.any(fixed != world, axis=1))
+            if len(idx):
+                start = arrays[f"{gid}/canonical"][idx].astype(np.float64)
+                canonical, _ = space.to_canonical(fixed[idx], body, start=start)
+                arrays[f"{gid}/world"] = fixed.astype(np.float32)
+                arrays[f"{gid}/canonical"][idx] = canonical.astype(np.float32)
+                moved += len(idx)
+                changed = True
+        if changed:
+            _save_atomic(path, arrays)
+    return moved
 
 
 def _save_atomic(path: Path, arrays: dict) -> None:
