@@ -2,8 +2,10 @@
 
 beta -> body mesh; explicit garment meshes X*_i(beta) in canonical space; every layer's fields at
 every garment vertex; untangle; L-BFGS fit of each garment to its untangled field (``service.fit``);
-the diffused body displacement carries everything to the body (world space); a quality report with
-the measures of ``service.quality`` before (explicit meshes) and after.
+the diffused body displacement carries everything to the body (world space); the exact repair of
+``service.repair`` (the learned fields are millimetres off the meshes: the repair makes the returned
+meshes meet the measures exactly); a quality report with the measures of ``service.quality`` before
+(explicit meshes), after the fit alone and after the repair.
 
 ``OutfitModels`` loads everything once (it is what a server keeps); ``make_outfit`` is one request.
 """
@@ -163,7 +165,8 @@ def make_outfit(
     fit_world, repairs = world, []
     if untangle_layers and repair:
         t0 = time.perf_counter()
-        world, repairs = _repair(models, layer_ids, beta, body, fitted, world, faces, repair_settings)
+        meshes = (explicit, fitted, world, faces)
+        world, repairs = _repair(models, layer_ids, beta, body, *meshes, repair_settings)
         seconds["repair"] = time.perf_counter() - t0
     outfit = Outfit(body, models.body.faces, list(zip(garment_ids, world, faces, strict=True)))
     report = {"garments": garment_ids, "beta": beta.tolist(), "untangled": untangle_layers}
@@ -189,7 +192,7 @@ def make_outfit(
     return outfit
 
 
-def _repair(models, layer_ids, beta, body, fitted, world, faces, settings: RepairSettings):
+def _repair(models, layer_ids, beta, body, explicit, fitted, world, faces, settings: RepairSettings):
     """Repaired world meshes and their ``RepairResult``s, each layer against the final inner ones.
 
     Which vertices can be near an inner layer, and where it covers them, comes from the fields at the
@@ -208,8 +211,10 @@ def _repair(models, layer_ids, beta, body, fitted, world, faces, settings: Repai
         r = repair_layer(x, f, layers, settings)
         out.append(r.vertices if np.all(np.isfinite(r.vertices)) else x)
         results.append(r)
-        explicit_world = models.space.to_body(models.explicit[layer_ids[i + 1]].canonical(beta), body)
-        moved = float(np.linalg.norm(out[-1] - explicit_world, axis=1).max())
+        # How far this layer now is from its explicit mesh, whose fields the outer layers see: the fit
+        # moved it in canonical space (x 1.2 for the stretch of the body map), the repair in world space.
+        fit_move = float(np.linalg.norm(fitted[i] - explicit[i], axis=1).max())
+        moved = 1.2 * fit_move + float(np.linalg.norm(out[-1] - x, axis=1).max())
         inner.append((ClosestPoint.build(out[-1], f), False, layer_ids[i + 1], moved))
     return out, results
 
