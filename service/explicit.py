@@ -15,6 +15,11 @@ import numpy as np
 
 from service.paths import models_dir
 
+# ONNX contract of the exported model (export/explicit.py): beta (B, 3) -> canonical vertices (B, V, 3)
+ONNX_INPUT, ONNX_OUTPUT, ONNX_BATCH_AXIS = "beta", "vertices", "shapes"
+ONNX_OPSET = 17
+ONNX_TOLERANCE = 1e-5  # m: float32 graph against this float64 reference
+
 
 @dataclass
 class ExplicitModel:
@@ -65,3 +70,21 @@ class ExplicitModel:
                 str(z["garment_id"]), z["mean"], z["basis"], z["beta_shift"], z["beta_scale"],
                 [z[f"w{i}"] for i in range(n)], [z[f"b{i}"] for i in range(n)],
             )  # fmt: skip
+
+
+class ExplicitOnnx:
+    """The exported explicit model run by onnxruntime: what the service uses."""
+
+    def __init__(self, garment_id: str, directory: Path | None = None, threads: int = 1):
+        import onnxruntime as ort  # lazy: only the serving path needs it
+
+        path = Path(directory or models_dir() / "explicit") / f"{garment_id}.onnx"
+        options = ort.SessionOptions()
+        options.intra_op_num_threads = threads
+        options.enable_cpu_mem_arena = False
+        self.session = ort.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
+
+    def canonical(self, beta: np.ndarray) -> np.ndarray:
+        """Canonical garment vertices ``(V, 3)`` float64 for one beta ``(3,)``."""
+        b = np.asarray(beta, dtype=np.float32).reshape(1, 3)
+        return self.session.run([ONNX_OUTPUT], {ONNX_INPUT: b})[0][0].astype(np.float64)

@@ -23,7 +23,7 @@ from service.body import DEFAULT_BETA, BodyModel
 from service.canonical import CanonicalSpace
 from service.catalog import Garment, load_catalog
 from service.closest import ClosestPoint, signed_distance
-from service.explicit import ExplicitModel
+from service.explicit import ExplicitModel, ExplicitOnnx
 from service.fields import BODY, FieldSet, FieldValues
 from service.fit import FitResult, FitSettings, fit_garment
 from service.quality import Layer, intersections, penetration
@@ -46,7 +46,7 @@ class OutfitModels:
 
     body: BodyModel
     catalog: dict[str, Garment]
-    explicit: dict[str, ExplicitModel]
+    explicit: dict[str, ExplicitModel | ExplicitOnnx]
     fields: FieldSet
     neural_untangler: NeuralUntangler
     space: CanonicalSpace
@@ -76,7 +76,7 @@ class OutfitModels:
         directory = Path(directory or models_dir())
         body = BodyModel.load(directory / "body" / "anny_shape.npz")
         catalog = load_catalog(directory / "garments")
-        explicit = {gid: ExplicitModel.load(gid, directory / "explicit") for gid in catalog}
+        explicit = {gid: ExplicitOnnx(gid, directory / "explicit") for gid in catalog}
         return cls(
             body, catalog, explicit, FieldSet(directory / "fields", threads),
             NeuralUntangler(directory / "untangler", threads),

@@ -72,3 +72,17 @@ def test_tiny_drape_dataset_builds_resumes_and_trains(tmp_path):
     model = fit_explicit("shorts", train["beta"], train["canonical"].astype(np.float64))
     err = np.linalg.norm(model.canonical(train["beta"][1]) - train["canonical"][1], axis=1)
     assert err.mean() < 1e-3
+
+
+def test_committed_onnx_explicit_models_match_the_numpy_reference():
+    pytest.importorskip("onnxruntime")
+    from service.catalog import load_catalog
+    from service.explicit import ONNX_TOLERANCE, ExplicitModel, ExplicitOnnx
+    from training.drape.dataset import sample_betas
+
+    for gid in load_catalog():
+        reference, onnx_model = ExplicitModel.load(gid), ExplicitOnnx(gid)
+        for beta in sample_betas(4, 5):
+            np.testing.assert_allclose(
+                onnx_model.canonical(beta), reference.canonical(beta), atol=ONNX_TOLERANCE
+            )

@@ -93,6 +93,8 @@ def main(argv=None) -> None:
     args = parser.parse_args(argv)
     import json
 
+    from export.explicit import export_explicit
+
     out = args.out or models_dir() / "explicit"
     ids = args.ids or json.loads((args.data / "shapes.json").read_text())["config"]["garments"]
     for gid in ids:
@@ -101,8 +103,10 @@ def main(argv=None) -> None:
         pred = np.stack([model.canonical(b) for b in train["beta"]])
         err = np.linalg.norm(pred - train["canonical"], axis=2)
         path = model.save(out / f"{gid}.npz")
+        off = export_explicit(gid, out)
         print(
-            f"{gid}: {model.basis.shape[0]} components, train error mean {err.mean() * 1e3:.2f} mm -> {path}"
+            f"{gid}: {model.basis.shape[0]} components, train error mean {err.mean() * 1e3:.2f} mm -> {path} "
+            f"(+ .onnx, {off * 1e3:.4f} mm off)"
         )
 
 
