@@ -13,7 +13,7 @@ the body outwards (inner layers are final when an outer one is repaired):
    vertices held), so a push lifts a patch instead of a spike.
 3. Exact edge-triangle tests find the triangle pairs still crossing (an inner bump poking between
    outer vertices); their outer vertices get a larger margin (``growth``, up to ``max_margin``),
-   and the loop repeats.
+   move out along the layer's own normal by ``margin`` in the next round, and the loop repeats.
 
 Everything is local to the vertices that the fields place within ``REACH`` of an inner layer (the
 caller's ``Inner.near``): most vertices are far from every inner layer and are never queried.
@@ -28,6 +28,7 @@ import numpy as np
 from service.closest import ClosestPoint
 from service.fit import dilate, vertex_neighbours
 from service.intersections import intersecting_pairs
+from service.mesh import vertex_normals
 from service.quality import PENETRATION_BAND
 
 REACH = 0.03
@@ -113,6 +114,7 @@ def repair_layer(
     margin = np.full(len(x), settings.margin)
     moved = np.zeros(len(x), dtype=bool)
     forced = np.zeros(len(x), dtype=bool)
+    kick = np.zeros(len(x))  # m: outward push of vertices of still-crossing triangles
     # Only triangles with a vertex near an inner layer can cross it.
     tested = [np.flatnonzero(layer.near[faces].any(axis=1)) for layer in inner]
     log = []
@@ -125,6 +127,12 @@ def repair_layer(
             idx, target = _pushes(x + u, layer, margin, settings.band, forced)
             u[idx] = target - x[idx]
             held[idx] = True
+        # A crossing that survives its vertices' margins is an inner feature between them (fingers in a
+        # sleeve, a T-shirt's hem inside the pants): the layer bulges out along its own normal there.
+        bulge = kick > 0
+        if bulge.any():
+            u[bulge] += kick[bulge, None] * vertex_normals(x, faces)[bulge]
+            held |= bulge
         if held.any():
             region = dilate(held, adjacency, settings.ring)
             u = _diffuse(u, held, region, adjacency, settings.smoothing)
@@ -136,10 +144,14 @@ def repair_layer(
             crossing += len(pairs)
             culprits.append(faces[t][pairs[:, 0]].ravel())
         log.append({"pushed": int(held.sum()), "crossing_pairs": crossing})
-        if crossing == 0 and not held.any():
+        # Done when nothing crosses and no vertex moved more than 0.1 mm this round (a vertex squeezed
+        # between two inner layers closer than the margin would otherwise be pushed back and forth).
+        if crossing == 0 and (not held.any() or np.abs(u).max() < 1e-4):
             break
         if crossing:
             worse = np.unique(np.concatenate(culprits))
             forced[worse] = True
             margin[worse] = np.minimum(settings.growth * margin[worse], settings.max_margin)
+            kick[:] = 0.0
+            kick[worse] = settings.margin
     return RepairResult(x, moved, rounds, crossing, log)
