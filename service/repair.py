@@ -73,13 +73,13 @@ class RepairResult:
 
 
 def _pushes(x: np.ndarray, inner: Inner, margin: np.ndarray, band: float, forced: np.ndarray):
-    """The vertices of ``x (V, 3)`` that violate ``margin (V,)`` against ``inner``, and where they go:
-    (indices (K,), targets (K, 3)). ``forced (V,)`` marks vertices of crossing triangles: inside the
-    inner layer they move out even where its covariant field says it does not cover them (a T-shirt's
-    hem poking through the pants it is tucked into)."""
+    """The vertices of ``x (V, 3)`` that violate ``margin (V,)`` against ``inner``, where they go, and
+    how many are inside it: (indices (K,), targets (K, 3), count). ``forced (V,)`` marks vertices of
+    crossing triangles: inside the inner layer they move out even where its covariant field says it
+    does not cover them (a T-shirt's hem poking through the pants it is tucked into)."""
     near = np.flatnonzero(inner.near)
     if not len(near):
-        return near, np.zeros((0, 3))
+        return near, np.zeros((0, 3)), 0
     q = inner.mesh.query(x[near])
     inside = q.signed < 0
     # A vertex pushed to the margin last round lands a rounding error short of it: 10 % slack stops
@@ -89,7 +89,17 @@ def _pushes(x: np.ndarray, inner: Inner, margin: np.ndarray, band: float, forced
     bad = short & (inner.closed | ~inside | ((q.signed > -band) & covered))
     idx = near[bad]
     # Out along the face normal from the closest point, to the margin.
-    return idx, q.point[bad] + margin[idx, None] * q.normal[bad]
+    return idx, q.point[bad] + margin[idx, None] * q.normal[bad], int((bad & inside).sum())
+
+
+def _faces_around(mesh: ClosestPoint, triangles: np.ndarray, pad: float) -> np.ndarray:
+    """Indices of ``mesh``'s faces with a vertex inside the bounding box of ``triangles (T, 3, 3)``
+    grown by ``pad``."""
+    if not len(triangles):
+        return np.zeros(0, dtype=np.int64)
+    lo, hi = triangles.min(axis=(0, 1)) - pad, triangles.max(axis=(0, 1)) + pad
+    inside = np.all((mesh.vertices >= lo) & (mesh.vertices <= hi), axis=1)
+    return np.flatnonzero(inside[mesh.faces].any(axis=1))
 
 
 def _diffuse(u: np.ndarray, held: np.ndarray, region: np.ndarray, adjacency, iterations: int) -> np.ndarray:
@@ -115,18 +125,24 @@ def repair_layer(
     moved = np.zeros(len(x), dtype=bool)
     forced = np.zeros(len(x), dtype=bool)
     kick = np.zeros(len(x))  # m: outward push of vertices of still-crossing triangles
-    # Only triangles with a vertex near an inner layer can cross it.
+    # Only triangles with a vertex near an inner layer can cross it, and only the inner triangles
+    # around those (the rest of a body never changes between rounds).
     tested = [np.flatnonzero(layer.near[faces].any(axis=1)) for layer in inner]
+    nearby = [
+        _faces_around(layer.mesh, x[faces[t]], settings.band) for layer, t in zip(inner, tested, strict=True)
+    ]
     log = []
     crossing, rounds = 0, 0
     while rounds < settings.rounds:
         rounds += 1
         held = np.zeros(len(x), dtype=bool)
         u = np.zeros_like(x)
+        inside = 0
         for layer in inner:
-            idx, target = _pushes(x + u, layer, margin, settings.band, forced)
+            idx, target, n_inside = _pushes(x + u, layer, margin, settings.band, forced)
             u[idx] = target - x[idx]
             held[idx] = True
+            inside += n_inside
         # A crossing that survives its vertices' margins is an inner feature between them (fingers in a
         # sleeve, a T-shirt's hem inside the pants): the layer bulges out along its own normal there.
         bulge = kick > 0
@@ -139,14 +155,15 @@ def repair_layer(
             x += u
             moved |= np.linalg.norm(u, axis=1) > 0
         crossing, culprits = 0, []
-        for layer, t in zip(inner, tested, strict=True):
-            pairs = intersecting_pairs(x, faces[t], layer.mesh.vertices, layer.mesh.faces)
+        for layer, t, sub in zip(inner, tested, nearby, strict=True):
+            pairs = intersecting_pairs(x, faces[t], layer.mesh.vertices, layer.mesh.faces[sub])
             crossing += len(pairs)
             culprits.append(faces[t][pairs[:, 0]].ravel())
-        log.append({"pushed": int(held.sum()), "crossing_pairs": crossing})
-        # Done when nothing crosses and no vertex moved more than 0.1 mm this round (a vertex squeezed
-        # between two inner layers closer than the margin would otherwise be pushed back and forth).
-        if crossing == 0 and (not held.any() or np.abs(u).max() < 1e-4):
+        log.append({"pushed": int(held.sum()), "inside": inside, "crossing_pairs": crossing})
+        # Done when nothing crosses and this round found no vertex inside an inner layer: the margin is
+        # a cushion, not a measure (a vertex squeezed between two inner layers closer than the margin
+        # would otherwise be pushed back and forth until the round cap).
+        if crossing == 0 and inside == 0:
             break
         if crossing:
             worse = np.unique(np.concatenate(culprits))
