@@ -31,10 +31,10 @@ from service.intersections import intersecting_pairs
 from service.mesh import vertex_normals
 from service.quality import PENETRATION_BAND
 
-REACH = 0.03
-"""m: vertices whose field distance to an inner layer is below this are checked against its mesh:
-the fields are ~1-2 mm off (DESIGN.md section 3), and a triangle can cross a mesh only if one of its
-vertices is within an edge length (~1.2 cm) of it."""
+REACH = PENETRATION_BAND + 0.01
+"""m: vertices whose field distance to an inner layer is below this are checked against its mesh: a
+vertex counts as inside an inner garment down to PENETRATION_BAND, and the fields are ~1-2 mm off near
+their surface and up to ~1 cm a few centimetres away from it (pants 3.5 cm inside a T-shirt read 4.5 cm)."""
 
 
 @dataclass
@@ -54,7 +54,7 @@ class RepairSettings:
     band: float = PENETRATION_BAND
     """m: how deep inside an inner garment a vertex counts as having crossed it."""
     ring: int = 2
-    rounds: int = 10
+    rounds: int = 24
     growth: float = 1.5
     """Factor on the margin of the vertices of triangles still crossing after a round."""
     max_margin: float = 0.008
@@ -69,6 +69,7 @@ class RepairResult:
     moved: np.ndarray  # (V,) bool: vertices displaced by the repair
     rounds: int
     crossing_pairs: int  # triangle pairs still crossing an inner layer at the end (0 = success)
+    inside: int  # vertices still inside an inner layer at the end (0 = success)
     log: list[dict] = field(default_factory=list)
 
 
@@ -132,9 +133,8 @@ def repair_layer(
         _faces_around(layer.mesh, x[faces[t]], settings.band) for layer, t in zip(inner, tested, strict=True)
     ]
     log = []
-    crossing, rounds = 0, 0
-    while rounds < settings.rounds:
-        rounds += 1
+    crossing, rounds = -1, 0  # -1: not tested yet
+    while True:
         held = np.zeros(len(x), dtype=bool)
         u = np.zeros_like(x)
         inside = 0
@@ -143,6 +143,12 @@ def repair_layer(
             u[idx] = target - x[idx]
             held[idx] = True
             inside += n_inside
+        # Done when the current meshes cross nothing and no vertex is inside an inner layer: the margin
+        # is a cushion, not a measure (a vertex squeezed between two inner layers closer than the margin
+        # would otherwise be pushed back and forth until the round cap).
+        if (crossing == 0 and inside == 0) or rounds == settings.rounds:
+            break
+        rounds += 1
         # A crossing that survives its vertices' margins is an inner feature between them (fingers in a
         # sleeve, a T-shirt's hem inside the pants): the layer bulges out along its own normal there.
         bulge = kick > 0
@@ -160,15 +166,10 @@ def repair_layer(
             crossing += len(pairs)
             culprits.append(faces[t][pairs[:, 0]].ravel())
         log.append({"pushed": int(held.sum()), "inside": inside, "crossing_pairs": crossing})
-        # Done when nothing crosses and this round found no vertex inside an inner layer: the margin is
-        # a cushion, not a measure (a vertex squeezed between two inner layers closer than the margin
-        # would otherwise be pushed back and forth until the round cap).
-        if crossing == 0 and inside == 0:
-            break
+        kick[:] = 0.0
         if crossing:
             worse = np.unique(np.concatenate(culprits))
             forced[worse] = True
             margin[worse] = np.minimum(settings.growth * margin[worse], settings.max_margin)
-            kick[:] = 0.0
             kick[worse] = settings.margin
-    return RepairResult(x, moved, rounds, crossing, log)
+    return RepairResult(x, moved, rounds, crossing, inside, log)

@@ -35,12 +35,14 @@ def _tangle(report: dict, when: str) -> tuple[int, float]:
 def test_tshirt_under_jacket_untangles(models, held_out_beta, untangler):
     r = make_outfit(models, ["tshirt", "jacket"], held_out_beta, untangler=untangler).report
     pairs_before, pen_before = _tangle(r, "before")
-    pairs_fit, pen_fit = _tangle(r, "fit")
+    _, pen_fit = _tangle(r, "fit")
     pairs_after, pen_after = _tangle(r, "after")
     # The explicit models alone tangle (crossing triangle pairs, jacket vertices inside the T-shirt)...
     assert pairs_before > 50 and pen_before > 0.001
-    # ...the field fit removes part of it (the learned fields are mm off the meshes)...
-    assert pairs_fit <= pairs_before and pen_fit < pen_before, (r["intersections_fit"], r["penetration_fit"])
+    # ...the field fit moves most penetrating vertices out (it does not always lower the count of crossing
+    # triangle pairs: the learned fields are mm off the meshes, and new small crossings appear where the
+    # vertices it moves meet the ones it keeps; README, Outfits)...
+    assert pen_fit < 0.3 * pen_before, (r["penetration_before"], r["penetration_fit"])
     # ...and the exact repair meets the end-to-end issue's targets: no crossing, <= 0.1 % penetrating.
     assert pairs_after == 0, r["intersections_after"]
     assert pen_after <= 0.001, r["penetration_after"]
