@@ -135,6 +135,9 @@ class TryOn:
         future = self._submit(key, spec, engine, time.monotonic() + timeout)
         # asyncio.wait, not wait_for: a timeout must not cancel a job other requests share.
         wrapped = asyncio.wrap_future(future)
+        # A job that ends after its request gave up still ends with a result or an exception (dropped
+        # unrun past its deadline): retrieve it, so asyncio does not log it as never retrieved.
+        wrapped.add_done_callback(lambda f: f.cancelled() or f.exception())
         done, _ = await asyncio.wait({wrapped}, timeout=timeout)
         try:
             if not done:
