@@ -55,6 +55,9 @@ class RepairSettings:
     """m: how deep inside an inner garment a vertex counts as having crossed it."""
     ring: int = 2
     rounds: int = 24
+    patience: int = 6
+    """Rounds without a new lowest count of faults (crossing pairs + vertices inside) before the loop
+    gives up; the result is then the round with the fewest (tight stacks of four tops oscillate)."""
     growth: float = 1.5
     """Factor on the margin of the vertices of triangles still crossing after a round."""
     max_margin: float = 0.008
@@ -123,7 +126,6 @@ def repair_layer(
     faces = np.asarray(faces)
     adjacency = vertex_neighbours(faces, len(x))
     margin = np.full(len(x), settings.margin)
-    moved = np.zeros(len(x), dtype=bool)
     forced = np.zeros(len(x), dtype=bool)
     kick = np.zeros(len(x))  # m: outward push of vertices of still-crossing triangles
     # Only triangles with a vertex near an inner layer can cross it, and only the inner triangles
@@ -134,6 +136,7 @@ def repair_layer(
     ]
     log = []
     crossing, rounds = -1, 0  # -1: not tested yet
+    best = (np.inf, x.copy(), -1, -1, 0)  # (crossing pairs + vertices inside, x, crossing, inside, round)
     while True:
         held = np.zeros(len(x), dtype=bool)
         u = np.zeros_like(x)
@@ -143,10 +146,14 @@ def repair_layer(
             u[idx] = target - x[idx]
             held[idx] = True
             inside += n_inside
+        if crossing >= 0 and crossing + inside < best[0]:
+            best = (crossing + inside, x.copy(), crossing, inside, rounds)
         # Done when the current meshes cross nothing and no vertex is inside an inner layer: the margin
         # is a cushion, not a measure (a vertex squeezed between two inner layers closer than the margin
         # would otherwise be pushed back and forth until the round cap).
         if (crossing == 0 and inside == 0) or rounds == settings.rounds:
+            break
+        if rounds - best[4] >= settings.patience:  # the faults no longer fall: an oscillation
             break
         rounds += 1
         # A crossing that survives its vertices' margins is an inner feature between them (fingers in a
@@ -159,7 +166,6 @@ def repair_layer(
             region = dilate(held, adjacency, settings.ring)
             u = _diffuse(u, held, region, adjacency, settings.smoothing)
             x += u
-            moved |= np.linalg.norm(u, axis=1) > 0
         crossing, culprits = 0, []
         for layer, t, sub in zip(inner, tested, nearby, strict=True):
             pairs = intersecting_pairs(x, faces[t], layer.mesh.vertices, layer.mesh.faces[sub])
@@ -172,4 +178,7 @@ def repair_layer(
             forced[worse] = True
             margin[worse] = np.minimum(settings.growth * margin[worse], settings.max_margin)
             kick[worse] = settings.margin
+    if crossing + inside > best[0]:  # stopped while oscillating: return the round with the fewest faults
+        _, x, crossing, inside, _ = best
+    moved = np.any(x != np.asarray(vertices, dtype=np.float64), axis=1)
     return RepairResult(x, moved, rounds, crossing, inside, log)
