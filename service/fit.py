@@ -106,6 +106,9 @@ def fit_garment(
     clock = _Clock(seconds)
     with clock("fields"):
         f_star, h_star = _values(fields, n_layers, x0, layer, settings.reach)
+    if not (np.all(np.isfinite(f_star)) and np.all(np.isfinite(h_star))):
+        # A network answered NaN or inf: nothing to fit against; the explicit mesh, flagged.
+        return FitResult(x0.copy(), np.zeros(len(x0), dtype=bool), 0, 0, np.nan, np.nan, seconds, False)
     with clock("untangle"):
         f_i = untangler(f_star, h_star, False)[0][:, layer]
     target = f_star[:, layer].copy()  # each vertex keeps its own field value unless untangling moves it
@@ -127,6 +130,10 @@ def fit_garment(
         with clock("fields"):
             lin = [fields(k, x[idx], True) for k in range(n_layers)]
         fl = np.stack([v.f for v in lin], 1)
+        finite = all(np.all(np.isfinite(a)) for v in lin for a in v)
+        if not (finite and np.all(np.isfinite(fl))):
+            ok = False  # keep the last valid iterate
+            break
         far = far_layers(fl, layer, settings.reach)
         hl = np.where(far, INACTIVE, np.stack([v.h for v in lin], 1))
         with clock("untangle"):
@@ -145,7 +152,11 @@ def fit_garment(
             break
         x[idx] = y
         with clock("fields"):
-            f_star[idx], h_star[idx] = _values(fields, n_layers, x[idx], layer, settings.reach)
+            f_new, h_new = _values(fields, n_layers, x[idx], layer, settings.reach)
+        if not (np.all(np.isfinite(f_new)) and np.all(np.isfinite(h_new))):
+            ok = False
+            break
+        f_star[idx], h_star[idx] = f_new, h_new
         with clock("untangle"):
             residual[idx] = untangler(f_star[idx], h_star[idx], False)[0][:, layer] - target[idx]
     return FitResult(

@@ -229,7 +229,9 @@ def _fit_report(ids, explicit, faces, fits: list[FitResult], untangler: str) -> 
         out.setdefault("mean_green_strain", {})[g] = round(float(strain.mean()), 6)
         out.setdefault("optimised_vertices", {})[g] = int(r.optimised.sum())
         out.setdefault("iterations", {})[g] = r.iterations
-        residual = [round(r.residual_before * 1e3, 3), round(r.residual_after * 1e3, 3)]
+        # None where a network answered NaN (the fit then stopped; JSON has no NaN)
+        ends = (r.residual_before, r.residual_after)
+        residual = [round(v * 1e3, 3) if np.isfinite(v) else None for v in ends]
         out.setdefault("residual_mm", {})[g] = residual
     return out
 

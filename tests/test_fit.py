@@ -113,3 +113,29 @@ def test_only_conflicting_vertices_and_their_rings_move():
     assert clearance.min() > GAP_DELTA - FitSettings().conflict_tol
     assert res.residual_after <= FitSettings().conflict_tol
 
+
+
+def test_a_nan_from_a_field_leaves_the_garment_finite_and_flags_the_fit():
+    v, f = _sheet(z=0.002)  # inside the gap: the fit has work to do
+    flat = planes([0.0, 0.002])
+
+    def broken(k, x, gradient):
+        out = flat(k, x, gradient)
+        if k == 0:  # the body's network answers NaN for half of the points
+            nan = np.where(np.arange(len(x)) % 2 == 0, np.nan, 0.0)
+            grad = None if out.grad_f is None else out.grad_f + nan[:, None]
+            return FieldValues(out.f + nan, out.h, grad, out.grad_h)
+        return out
+
+    res = fit_garment(v, f, 1, 2, broken, reference)
+    assert np.all(np.isfinite(res.vertices))
+    assert not res.ok  # flagged: make_outfit then serves the explicit mesh and names it in "fallback"
+
+
+def test_degenerate_triangles_do_not_break_the_fit():
+    v, f = _sheet(z=0.002)
+    v = v.copy()
+    v[f[0, 1]] = v[f[0, 0]]  # one triangle collapses to a segment: no rest frame, no strain term
+    res = fit_garment(v, f, 1, 2, planes([0.0, 0.002]), reference)
+    assert res.ok and np.all(np.isfinite(res.vertices))
+    np.testing.assert_allclose(res.vertices[:, 2], GAP_DELTA, atol=1e-6)

@@ -83,3 +83,21 @@ def test_serving_path_imports_no_torch():
     modules = "service.app, service.cli, service.outfit, service.fields, service.fit, service.gltf"
     code = f"import sys, {modules}; sys.exit('torch' in sys.modules or 'training' in sys.modules)"
     assert subprocess.run([sys.executable, "-c", code], check=False).returncode == 0
+
+
+def test_a_field_answering_nan_gives_the_explicit_mesh_and_a_flag(models, held_out_beta, monkeypatch):
+    from service.fields import FieldValues
+
+    real = models.fields.__class__.__call__
+
+    def nan_for_tshirt(self, field_id, x, beta, gradient=False):
+        out = real(self, field_id, x, beta, gradient)
+        if field_id != "tshirt":
+            return out
+        return FieldValues(*(None if a is None else np.full_like(a, np.nan) for a in out))
+
+    monkeypatch.setattr(models.fields.__class__, "__call__", nan_for_tshirt)
+    outfit = make_outfit(models, ["tshirt"], held_out_beta, measure=False)
+    assert outfit.report["fallback"] == ["tshirt"]
+    assert all(np.all(np.isfinite(v)) for _, v, _ in outfit.garments)
+    json.dumps(outfit.report, allow_nan=False)  # what an HTTP answer needs

@@ -64,3 +64,14 @@ def test_nothing_ends_inside_a_closed_body():
     assert r.crossing_pairs == 0
     assert np.linalg.norm(r.vertices, axis=1).min() >= 0.1 + RepairSettings().margin - 2e-4
     assert len(intersecting_pairs(r.vertices, f, body.vertices, body.faces)) == 0
+
+
+def test_degenerate_triangles_stay_finite_through_the_repair():
+    inner_v, inner_f = _sheet(20, 0.4, lambda v: 0.0 * v[:, 0])
+    outer_v, outer_f = _sheet(12, 0.2, lambda v: -0.003 + 0.0 * v[:, 0])  # 3 mm below: all inside
+    outer_v[outer_f[5, 1]] = outer_v[outer_f[5, 0]]  # a zero-area triangle
+    n = len(outer_v)
+    inner = [Inner(ClosestPoint.build(inner_v, inner_f), False, _everywhere(n), _everywhere(n))]
+    r = repair_layer(outer_v, outer_f, inner)
+    assert np.all(np.isfinite(r.vertices))
+    assert r.crossing_pairs == 0 and r.inside == 0
