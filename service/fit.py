@@ -117,23 +117,23 @@ def fit_garment(
     x = x0.copy()
     optimised = np.zeros(len(x0), dtype=bool)
     iterations, linearisations, ok = 0, 0, True
-    rest = None
+    full_rest, rest, touched = RestShape.build(x0, faces), None, None
     for _ in range(settings.outer):
         conflict = np.abs(residual) > settings.conflict_tol
         if not conflict.any():
             break
         optimised |= dilate(conflict, adjacency, settings.ring)
         idx = np.flatnonzero(optimised)
-        if rest is None or len(rest.faces) != int(optimised[faces].any(axis=1).sum()):
+        near = optimised[faces].any(axis=1)
+        if touched is None or (near != touched).any():
             # Only triangles touching an optimised vertex change: the strain of the rest is constant.
-            rest = RestShape.build(x0, faces).subset(optimised[faces].any(axis=1))
+            rest, touched = full_rest.subset(near), near
         with clock("fields"):
             lin = [fields(k, x[idx], True) for k in range(n_layers)]
-        fl = np.stack([v.f for v in lin], 1)
-        finite = all(np.all(np.isfinite(a)) for v in lin for a in v)
-        if not (finite and np.all(np.isfinite(fl))):
-            ok = False  # keep the last valid iterate
+        if not all(np.all(np.isfinite(a)) for v in lin for a in v):
+            ok = False  # a network answered NaN or inf: keep the last valid iterate
             break
+        fl = np.stack([v.f for v in lin], 1)
         far = far_layers(fl, layer, settings.reach)
         hl = np.where(far, INACTIVE, np.stack([v.h for v in lin], 1))
         with clock("untangle"):

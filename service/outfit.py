@@ -174,7 +174,12 @@ def make_outfit(
         report |= _fit_report(garment_ids, explicit, faces, fits, untangler)
     if repairs:
         report["repair"] = {
-            g: {"moved_vertices": int(r.moved.sum()), "rounds": r.rounds, "crossing_pairs": r.crossing_pairs}
+            g: {
+                "moved_vertices": int(r.moved.sum()),
+                "rounds": r.rounds,
+                "crossing_pairs": r.crossing_pairs,
+                "inside_vertices": r.inside,
+            }
             for g, r in zip(garment_ids, repairs, strict=True)
         }
     if measure:
