@@ -139,3 +139,36 @@ def test_degenerate_triangles_do_not_break_the_fit():
     res = fit_garment(v, f, 1, 2, planes([0.0, 0.002]), reference)
     assert res.ok and np.all(np.isfinite(res.vertices))
     np.testing.assert_allclose(res.vertices[:, 2], GAP_DELTA, atol=1e-6)
+
+
+def test_compact_strain_equals_the_full_mesh_strain_on_its_vertices():
+    v, f = _sheet(n=8)
+    rng = np.random.default_rng(1)
+    x = v + rng.normal(scale=0.005, size=v.shape)
+    part = RestShape.build(v, f).subset(np.arange(len(f)) % 3 == 0)
+    keep = np.array([0, len(v) - 1])  # vertices of no chosen triangle still get a slot
+    used, local = part.compact(keep)
+    assert set(keep) <= set(used)
+    e_full, g_full = strain_energy(x, part)
+    e_local, g_local = strain_energy(x[used], local)
+    assert e_local == pytest.approx(e_full, rel=1e-12)
+    np.testing.assert_allclose(g_local, g_full[used], rtol=1e-12, atol=1e-15)
+    assert np.all(np.delete(g_full, used, axis=0) == 0)
+
+
+def test_far_layers_are_never_asked_for_gradients_and_do_not_change_the_fit():
+    # A third layer 0.5 m away from the sheet takes no part: its gradient graph is never run, and the
+    # fit is the one of the sheet against the body alone.
+    v, f = _sheet(z=0.002)
+    asked = []
+    flat3, flat2 = planes([0.0, 0.002, 0.5]), planes([0.0, 0.002])
+
+    def fields(k, x, gradient):
+        if gradient:
+            asked.append((k, len(x)))
+        return flat3(k, x, gradient)
+
+    with_far = fit_garment(v, f, 1, 3, fields, reference)
+    alone = fit_garment(v, f, 1, 2, flat2, reference)
+    assert asked and all(k != 2 for k, _ in asked)
+    np.testing.assert_allclose(with_far.vertices, alone.vertices, atol=1e-12)
