@@ -9,6 +9,7 @@ vertices, and ``closest_point_reference`` checks every triangle.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -74,6 +75,12 @@ class Closest:
     normal: np.ndarray  # (N, 3) unit normal of that face
 
 
+def _sum_into(index: np.ndarray, values: np.ndarray, n: int) -> np.ndarray:
+    """``out (n, 3)`` with ``out[index[i]] += values[i]`` in order: ``np.add.at`` bit for bit (both add
+    in input order from zero), ~10x faster."""
+    return np.stack([np.bincount(index, weights=values[:, d], minlength=n) for d in range(3)], axis=1)
+
+
 @dataclass
 class PseudoNormals:
     """Angle-weighted pseudo-normals (Baerentzen and Aanaes 2005) of a mesh's vertices and edges.
@@ -90,19 +97,19 @@ class PseudoNormals:
     @classmethod
     def build(cls, vertices: np.ndarray, faces: np.ndarray, fn: np.ndarray) -> PseudoNormals:
         n_v = len(vertices)
-        vertex = np.zeros((n_v, 3))
+        weighted = []
         for k in range(3):
             a = vertices[faces[:, (k + 1) % 3]] - vertices[faces[:, k]]
             b = vertices[faces[:, (k + 2) % 3]] - vertices[faces[:, k]]
             cos = np.einsum("fd,fd->f", a, b) / np.maximum(
                 np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1), 1e-300
             )
-            np.add.at(vertex, faces[:, k], np.arccos(np.clip(cos, -1, 1))[:, None] * fn)
+            weighted.append(np.arccos(np.clip(cos, -1, 1))[:, None] * fn)
+        vertex = _sum_into(faces.T.reshape(-1), np.concatenate(weighted), n_v)
         e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
         keys = np.minimum(e[:, 0], e[:, 1]) * n_v + np.maximum(e[:, 0], e[:, 1])
         edge_keys, inverse = np.unique(keys, return_inverse=True)
-        edge = np.zeros((len(edge_keys), 3))
-        np.add.at(edge, inverse, np.tile(fn, (3, 1)))
+        edge = _sum_into(inverse, np.tile(fn, (3, 1)), len(edge_keys))
         return cls(vertex, edge_keys, edge)
 
     def at(self, faces: np.ndarray, face: np.ndarray, bary: np.ndarray, fn: np.ndarray) -> np.ndarray:
@@ -146,36 +153,48 @@ def closest_point_reference(points: np.ndarray, vertices: np.ndarray, faces: np.
     return _finish(points, vertices, faces, fn, face, w[np.arange(len(points)), face], pseudo)
 
 
-@dataclass
 class ClosestPoint:
     """Closest-point queries against a fixed triangle mesh.
 
     Candidates are the triangles around the ``k`` nearest vertices: exact whenever the closest
     triangle touches one of them, which holds for the well-shaped meshes used here (checked
-    against ``closest_point_reference`` in the tests).
+    against ``closest_point_reference`` in the tests). The search structures are built on the first
+    query: the repair builds one for every layer it returns, and nothing asks the outermost.
     """
 
-    vertices: np.ndarray  # (V, 3)
-    faces: np.ndarray  # (F, 3)
-    ring: np.ndarray  # (V, R) faces around each vertex, padded with -1
-    tree: cKDTree
-    fn: np.ndarray  # (F, 3) unit face normals
-    pseudo: PseudoNormals
+    def __init__(self, vertices: np.ndarray, faces: np.ndarray):
+        self.vertices = vertices  # (V, 3) float64
+        self.faces = faces  # (F, 3) int64
 
     @classmethod
     def build(cls, vertices: np.ndarray, faces: np.ndarray) -> ClosestPoint:
         check_mesh(vertices, faces)
-        vertices = np.asarray(vertices, dtype=np.float64)
-        faces = np.asarray(faces, dtype=np.int64)
-        owner = faces.reshape(-1)
+        return cls(np.asarray(vertices, dtype=np.float64), np.asarray(faces, dtype=np.int64))
+
+    @cached_property
+    def ring(self) -> np.ndarray:
+        """(V, R) faces around each vertex in increasing order, padded with -1."""
+        owner = self.faces.reshape(-1)
         order = np.argsort(owner, kind="stable")
-        count = np.bincount(owner, minlength=len(vertices))
+        count = np.bincount(owner, minlength=len(self.vertices))
         start = np.concatenate([[0], np.cumsum(count)[:-1]])
-        ring = np.full((len(vertices), max(int(count.max()), 1)), -1, dtype=np.int64)
+        ring = np.full((len(self.vertices), max(int(count.max()), 1)), -1, dtype=np.int64)
         slot = np.arange(len(owner)) - np.repeat(start, count)
         ring[owner[order], slot] = order // 3
-        fn = face_normals(vertices, faces)
-        return cls(vertices, faces, ring, cKDTree(vertices), fn, PseudoNormals.build(vertices, faces, fn))
+        return ring
+
+    @cached_property
+    def tree(self) -> cKDTree:
+        return cKDTree(self.vertices)
+
+    @cached_property
+    def fn(self) -> np.ndarray:
+        """(F, 3) unit face normals."""
+        return face_normals(self.vertices, self.faces)
+
+    @cached_property
+    def pseudo(self) -> PseudoNormals:
+        return PseudoNormals.build(self.vertices, self.faces, self.fn)
 
     def candidates(self, points: np.ndarray, k: int = 4) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Closest points of ``points (N, 3)`` on each triangle around their k nearest vertices.

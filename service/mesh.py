@@ -35,9 +35,11 @@ def face_normals(vertices: np.ndarray, faces: np.ndarray, normalize: bool = True
 def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """Area-weighted unit vertex normals ``(V, 3)``."""
     fn = face_normals(vertices, faces, normalize=False)
-    vn = np.zeros_like(vertices, dtype=np.float64)
-    for k in range(3):
-        np.add.at(vn, faces[:, k], fn)
+    # np.add.at over the three corners in turn, as one bincount per axis (same order, same sums).
+    index, values = np.asarray(faces).T.reshape(-1), np.tile(fn, (3, 1))
+    vn = np.stack(
+        [np.bincount(index, weights=values[:, d], minlength=len(vertices)) for d in range(3)], axis=1
+    )
     return vn / np.maximum(np.linalg.norm(vn, axis=1, keepdims=True), 1e-30)
 
 

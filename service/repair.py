@@ -27,7 +27,7 @@ import numpy as np
 
 from service.closest import ClosestPoint
 from service.fit import dilate, vertex_neighbours
-from service.intersections import intersecting_pairs
+from service.intersections import TriangleGrid
 from service.mesh import vertex_normals
 from service.quality import PENETRATION_BAND
 
@@ -76,15 +76,39 @@ class RepairResult:
     log: list[dict] = field(default_factory=list)
 
 
-def _pushes(x: np.ndarray, inner: Inner, margin: np.ndarray, band: float, forced: np.ndarray):
+class _Queries:
+    """The closest points of one inner layer at the outer layer's near vertices, kept between rounds:
+    a vertex that did not move gets its last answer (the query is a function of the point alone)."""
+
+    def __init__(self, inner: Inner):
+        self.mesh = inner.mesh
+        self.near = np.flatnonzero(inner.near)
+        self.points = np.full((len(self.near), 3), np.nan)  # NaN: never asked
+        self.signed = np.zeros(len(self.near))
+        self.point = np.zeros((len(self.near), 3))
+        self.normal = np.zeros((len(self.near), 3))
+
+    def at(self, x: np.ndarray) -> _Queries:
+        """Bring the answers up to date with the near vertices of ``x (V, 3)``."""
+        points = x[self.near]
+        stale = np.flatnonzero(np.any(points != self.points, axis=1))
+        if len(stale):
+            q = self.mesh.query(points[stale])
+            self.points[stale] = points[stale]
+            self.signed[stale], self.point[stale], self.normal[stale] = q.signed, q.point, q.normal
+        return self
+
+
+def _pushes(x: np.ndarray, inner: Inner, margin: np.ndarray, band: float, forced: np.ndarray, queries=None):
     """The vertices of ``x (V, 3)`` that violate ``margin (V,)`` against ``inner``, where they go, and
     how many are inside it: (indices (K,), targets (K, 3), count). ``forced (V,)`` marks vertices of
     crossing triangles: inside the inner layer they move out even where its covariant field says it
-    does not cover them (a T-shirt's hem poking through the pants it is tucked into)."""
-    near = np.flatnonzero(inner.near)
+    does not cover them (a T-shirt's hem poking through the pants it is tucked into). ``queries``
+    (a ``_Queries`` of ``inner``) keeps the closest points of the vertices that did not move."""
+    q = (queries or _Queries(inner)).at(x)
+    near = q.near
     if not len(near):
         return near, np.zeros((0, 3)), 0
-    q = inner.mesh.query(x[near])
     inside = q.signed < 0
     # A vertex pushed to the margin last round lands a rounding error short of it: 10 % slack stops
     # the loop from pushing it again and again by nothing.
@@ -108,13 +132,15 @@ def _faces_around(mesh: ClosestPoint, triangles: np.ndarray, pad: float) -> np.n
 
 def _diffuse(u: np.ndarray, held: np.ndarray, region: np.ndarray, adjacency, iterations: int) -> np.ndarray:
     """Spread displacements ``u (V, 3)`` from ``held`` into ``region`` (both (V,) bool)."""
-    free = region & ~held
-    if not free.any():
+    free = np.flatnonzero(region & ~held)
+    if not len(free):
         return u
-    degree = np.asarray(adjacency.sum(axis=1)).ravel()
+    # Only the free rows change: their rows of the adjacency give the same sums as the whole product.
+    rows = adjacency[free]
+    degree = np.maximum(np.asarray(rows.sum(axis=1)).ravel(), 1)[:, None]
+    u = u.copy()
     for _ in range(iterations):
-        mean = (adjacency @ u) / np.maximum(degree, 1)[:, None]
-        u = np.where(free[:, None], mean, u)
+        u[free] = (rows @ u) / degree
     return u
 
 
@@ -131,9 +157,17 @@ def repair_layer(
     # Only triangles with a vertex near an inner layer can cross it, and only the inner triangles
     # around those (the rest of a body never changes between rounds).
     tested = [np.flatnonzero(layer.near[faces].any(axis=1)) for layer in inner]
-    nearby = [
-        _faces_around(layer.mesh, x[faces[t]], settings.band) for layer, t in zip(inner, tested, strict=True)
+    grids = [
+        TriangleGrid.build(
+            layer.mesh.vertices, layer.mesh.faces[_faces_around(layer.mesh, x[faces[t]], settings.band)]
+        )
+        for layer, t in zip(inner, tested, strict=True)
     ]
+    queries = [_Queries(layer) for layer in inner]
+    # Crossing pairs (tested triangle, inner triangle) of each layer, and the vertices they were
+    # found at: a triangle none of whose vertices moved keeps its pairs (the inner layers are fixed).
+    hits = [np.zeros((0, 2), dtype=np.int64) for _ in inner]
+    tested_at = np.full_like(x, np.nan)
     log = []
     crossing, rounds = -1, 0  # -1: not tested yet
     best = (np.inf, x.copy(), -1, -1, 0)  # (crossing pairs + vertices inside, x, crossing, inside, round)
@@ -141,8 +175,8 @@ def repair_layer(
         held = np.zeros(len(x), dtype=bool)
         u = np.zeros_like(x)
         inside = 0
-        for layer in inner:
-            idx, target, n_inside = _pushes(x + u, layer, margin, settings.band, forced)
+        for layer, q in zip(inner, queries, strict=True):
+            idx, target, n_inside = _pushes(x + u, layer, margin, settings.band, forced, q)
             u[idx] = target - x[idx]
             held[idx] = True
             inside += n_inside
@@ -167,10 +201,15 @@ def repair_layer(
             u = _diffuse(u, held, region, adjacency, settings.smoothing)
             x += u
         crossing, culprits = 0, []
-        for layer, t, sub in zip(inner, tested, nearby, strict=True):
-            pairs = intersecting_pairs(x, faces[t], layer.mesh.vertices, layer.mesh.faces[sub])
-            crossing += len(pairs)
-            culprits.append(faces[t][pairs[:, 0]].ravel())
+        moved = np.any(x != tested_at, axis=1)
+        tested_at = x.copy()
+        for n, (t, grid) in enumerate(zip(tested, grids, strict=True)):
+            again = np.flatnonzero(moved[faces[t]].any(axis=1))
+            pairs = grid.crossing(x, faces[t[again]])
+            pairs[:, 0] = again[pairs[:, 0]]
+            hits[n] = np.concatenate([hits[n][~np.isin(hits[n][:, 0], again)], pairs])
+            crossing += len(hits[n])
+            culprits.append(faces[t][hits[n][:, 0]].ravel())
         log.append({"pushed": int(held.sum()), "inside": inside, "crossing_pairs": crossing})
         kick[:] = 0.0
         if crossing:

@@ -8,6 +8,8 @@ import pytest
 import trimesh
 
 from service.intersections import (
+    TriangleGrid,
+    crossing_triangles,
     intersecting_pairs,
     intersecting_pairs_reference,
     segments_cross_triangles,
@@ -230,3 +232,43 @@ def test_intersecting_pairs_on_a_mesh_without_faces():
         assert intersecting_pairs_reference(*args).shape == (0, 2)
         assert intersecting_pairs(*args).shape == (0, 2)
     assert intersecting_pairs(FLAT, none).shape == (0, 2)
+
+
+# ------------------------------------------------------------------ the repair's grid path
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_grid_crossing_matches_intersecting_pairs(seed: int):
+    rng = np.random.default_rng(300 + seed)
+    va, fa = perturbed_sphere(rng, 1.0, np.zeros(3), noise=0.05)
+    vb, fb = perturbed_sphere(rng, rng.uniform(0.3, 1.5), rng.uniform(-1.0, 1.0, size=3), noise=0.05)
+    vg, fg = perturbed_grid(rng, 6, 1.0, noise=0.03)
+    for (v1, f1), (v2, f2) in (((va, fa), (vb, fb)), ((vb, fb), (va, fa)), ((vg, fg), (va, fa))):
+        for cell in (None, 0.05, 0.7):
+            grid = TriangleGrid.build(v2, f2, cell)
+            got = grid.crossing(v1, f1)
+            assert len(got) == len(pair_set(got))  # each pair once
+            assert pair_set(got) == pair_set(intersecting_pairs(v1, f1, v2, f2))
+
+
+def test_grid_crossing_finds_a_known_crossing_and_nothing_far_away():
+    grid = TriangleGrid.build(FLAT, ONE_FACE)
+    spike = np.array([[0.0, 0.0, -1.0], [0.1, 0.0, 1.0], [-0.1, 0.1, 1.0]])
+    assert pair_set(grid.crossing(spike, ONE_FACE)) == {(0, 0)}
+    assert grid.crossing(spike + [0.0, 0.0, 5.0], ONE_FACE).shape == (0, 2)
+    assert grid.crossing(spike + 1e9, ONE_FACE).shape == (0, 2)  # beyond the cell keys
+
+
+def test_crossing_triangles_is_triangles_intersect_bit_for_bit():
+    rng = np.random.default_rng(7)
+    ta = rng.normal(size=(4000, 3, 3))
+    tb = ta + rng.normal(scale=0.7, size=ta.shape)
+    # Shared corners, coplanar and touching cases, where the determinants are exactly zero.
+    tb[:500, 0] = ta[:500, 0]
+    tb[500:1000] = ta[500:1000][:, [1, 0, 2]]
+    tb[1000:1500, :, 2] = ta[1000:1500, :, 2] = 0.0
+    na = np.cross(ta[:, 1] - ta[:, 0], ta[:, 2] - ta[:, 0])
+    nb = np.cross(tb[:, 1] - tb[:, 0], tb[:, 2] - tb[:, 0])
+    fast = crossing_triangles(ta, tb, na, nb)
+    np.testing.assert_array_equal(fast, triangles_intersect(ta, tb))
+    assert 100 < fast.sum() < 3900

@@ -185,3 +185,17 @@ def test_boundary_loops_open_chain_raises_value_error():
     assert not is_edge_manifold(faces)
     with pytest.raises(ValueError, match="open boundary chain"):
         boundary_loops(faces)
+
+
+def test_vertex_normals_match_add_at_bit_for_bit():
+    from service.mesh import face_normals, vertex_normals
+
+    rng = np.random.default_rng(3)
+    v, f = grid_mesh(7, 6)
+    v = v + rng.normal(scale=0.05, size=v.shape)
+    fn = face_normals(v, f, normalize=False)
+    vn = np.zeros_like(v)
+    for k in range(3):
+        np.add.at(vn, f[:, k], fn)
+    expected = vn / np.maximum(np.linalg.norm(vn, axis=1, keepdims=True), 1e-30)
+    np.testing.assert_array_equal(vertex_normals(v, f), expected)

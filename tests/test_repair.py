@@ -75,3 +75,40 @@ def test_degenerate_triangles_stay_finite_through_the_repair():
     r = repair_layer(outer_v, outer_f, inner)
     assert np.all(np.isfinite(r.vertices))
     assert r.crossing_pairs == 0 and r.inside == 0
+
+
+def test_kept_queries_answer_as_fresh_ones_after_some_vertices_move():
+    from service.repair import _Queries
+
+    inner_v, inner_f = _sheet(20, 0.4, lambda v: 0.01 * np.sin(20 * v[:, 0]))
+    outer_v, _ = _sheet(24, 0.36, lambda v: 0.005 + 0.0 * v[:, 0])
+    n = len(outer_v)
+    near = np.arange(n) % 3 > 0
+    layer = Inner(ClosestPoint.build(inner_v, inner_f), False, near, _everywhere(n))
+    kept = _Queries(layer).at(outer_v)
+    moved = outer_v.copy()
+    moved[::5] += [0.0, 0.0, 0.003]
+    kept.at(moved)
+    fresh = layer.mesh.query(moved[near])
+    np.testing.assert_array_equal(kept.signed, fresh.signed)
+    np.testing.assert_array_equal(kept.point, fresh.point)
+    np.testing.assert_array_equal(kept.normal, fresh.normal)
+
+
+def test_diffusion_on_the_free_rows_is_the_whole_product_bit_for_bit():
+    from service.fit import dilate, vertex_neighbours
+    from service.repair import _diffuse
+
+    v, f = _sheet(15, 0.3, lambda v: 0.0 * v[:, 0])
+    adjacency = vertex_neighbours(f, len(v))
+    rng = np.random.default_rng(0)
+    held = rng.random(len(v)) < 0.05
+    u = np.where(held[:, None], rng.normal(size=v.shape), 0.0)
+    region = dilate(held, adjacency, 2)
+    # The whole-matrix diffusion the row-restricted one replaces.
+    degree = np.asarray(adjacency.sum(axis=1)).ravel()
+    expected = u
+    for _ in range(8):
+        mean = (adjacency @ expected) / np.maximum(degree, 1)[:, None]
+        expected = np.where((region & ~held)[:, None], mean, expected)
+    np.testing.assert_array_equal(_diffuse(u, held, region, adjacency, 8), expected)
