@@ -29,6 +29,7 @@ from service.fit import FitResult, FitSettings, fit_garment
 from service.quality import Layer, intersections, penetration
 from service.repair import REACH, Inner, RepairSettings, repair_layer
 from service.sdf_grid import SdfGrid
+from service.squeeze import Outer, squeeze_layer
 from service.strain import RestShape, green_strain_norms
 from service.untangle import untangle_with_jacobian
 from service.untangle_onnx import N_SLOTS, NeuralUntangler
@@ -165,8 +166,8 @@ def make_outfit(
     fit_world, repairs = world, []
     if untangle_layers and repair:
         t0 = time.perf_counter()
-        meshes = (explicit, fitted, world, faces)
-        world, repairs = _repair(models, layer_ids, beta, body, *meshes, repair_settings)
+        world, repairs = _untangle_world(models, layer_ids, beta, body, explicit, fitted, world, faces,
+                                         repair_settings)  # fmt: skip
         seconds["repair"] = time.perf_counter() - t0
     outfit = Outfit(body, models.body.faces, list(zip(garment_ids, world, faces, strict=True)))
     report = {"garments": garment_ids, "beta": beta.tolist(), "untangled": untangle_layers}
@@ -197,14 +198,56 @@ def make_outfit(
     return outfit
 
 
-def _repair(models, layer_ids, beta, body, explicit, fitted, world, faces, settings: RepairSettings):
+def _untangle_world(models, layer_ids, beta, body, explicit, fitted, world, faces, settings: RepairSettings):
+    """The squeeze then the repair of the fitted world meshes; where crossings are left, once more from
+    the repaired meshes (the repair lifted an outer layer over an inner one that the squeeze can now
+    press under it). Returns the meshes with the fewest faults and their ``RepairResult``s."""
+    best = None
+    start = world
+    body_mesh = ClosestPoint.build(body, models.body.faces)
+    for _ in range(2):
+        squeezed = _squeeze(models, layer_ids[1:], beta, fitted, start, faces, body_mesh)
+        meshes = (explicit, fitted, world, squeezed, faces)
+        out, results = _repair(models, layer_ids, beta, body_mesh, *meshes, settings)
+        faults = sum(r.crossing_pairs + r.inside for r in results)
+        if best is None or faults < best[0]:
+            best = (faults, out, results)
+        if not faults:
+            break
+        start = out
+    return best[1], best[2]
+
+
+def _squeeze(models, garment_ids, beta, fitted, world, faces, body: ClosestPoint) -> list[np.ndarray]:
+    """World meshes with every garment pulled inside the outer ones that cover it (``service.squeeze``),
+    from the outermost inwards. Where an outer garment covers a vertex and how far it is comes from the
+    outer garment's fields at the vertex's fitted canonical position, as in ``_repair``."""
+    out = list(world)
+    meshes: dict[int, ClosestPoint] = {}
+    for j in range(len(out) - 2, -1, -1):
+        outer = []
+        for i in range(j + 1, len(out)):
+            v = models.fields(garment_ids[i], fitted[j], beta)
+            near = np.abs(v.f) < REACH
+            if not (near & (v.h < 0)).any():
+                continue
+            if i not in meshes:
+                meshes[i] = ClosestPoint.build(out[i], faces[i])
+            outer.append(Outer(meshes[i], near, v.h < 0))
+        if outer:
+            r = squeeze_layer(out[j], faces[j], outer, body)
+            out[j] = r.vertices if np.all(np.isfinite(r.vertices)) else out[j]
+    return out
+
+
+def _repair(models, layer_ids, beta, body: ClosestPoint, explicit, fitted, fit_world, world, faces, settings):
     """Repaired world meshes and their ``RepairResult``s, each layer against the final inner ones.
 
     Which vertices can be near an inner layer, and where it covers them, comes from the fields at the
     layer's fitted canonical vertices (values only; the learned body field is enough for that). The
     fields are those of the explicit meshes: an inner garment that its fit and repair moved by up to
     s is looked for within ``REACH`` + s."""
-    inner = [(ClosestPoint.build(body, models.body.faces), True, BODY, 0.0)]
+    inner = [(body, True, BODY, 0.0)]
     out, results = [], []
     for i, (x, f) in enumerate(zip(world, faces, strict=True)):
         layers = []
@@ -217,9 +260,10 @@ def _repair(models, layer_ids, beta, body, explicit, fitted, world, faces, setti
         out.append(r.vertices if np.all(np.isfinite(r.vertices)) else x)
         results.append(r)
         # How far this layer now is from its explicit mesh, whose fields the outer layers see: the fit
-        # moved it in canonical space (x 1.2 for the stretch of the body map), the repair in world space.
+        # moved it in canonical space (x 1.2 for the stretch of the body map), the squeeze and the
+        # repair in world space.
         fit_move = float(np.linalg.norm(fitted[i] - explicit[i], axis=1).max())
-        moved = 1.2 * fit_move + float(np.linalg.norm(out[-1] - x, axis=1).max())
+        moved = 1.2 * fit_move + float(np.linalg.norm(out[-1] - fit_world[i], axis=1).max())
         inner.append((ClosestPoint.build(out[-1], f), False, layer_ids[i + 1], moved))
     return out, results
 
