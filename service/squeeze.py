@@ -11,7 +11,9 @@ operator splits a violation between both layers too, but the fit moves a vertex 
 So, from the outermost garment inwards, every vertex of a garment that an outer garment covers (its
 covariant field h < 0 at the vertex) and that lies outside that outer mesh, by less than ``band``,
 moves straight towards its closest body point until it is ``margin`` inside the outer mesh (bisection
-on the fraction of its distance to the body it keeps, never closer than ``margin`` to the body).
+on the fraction of its distance to the body it keeps, never closer to the body than ``floor``: the
+caller keeps one margin per garment under it, so that a stack of squeezed layers does not collapse
+onto the skin, where the repair would have to lift them apart again).
 Towards the body rather than along the outer layer's normal: in a concave crease of the outer layer
 (pants under a belly) the normal of the nearest face points through the other side of the crease,
 and 118 of 768 crossings were left that way. The displacement spreads over ``ring``
@@ -63,7 +65,7 @@ class SqueezeResult:
 BISECTIONS = 6  # the kept fraction to 1/64: ~0.5 mm for a vertex 3 cm off the body
 
 
-def _pulls(x: np.ndarray, outer: Outer, body: ClosestPoint, settings: SqueezeSettings):
+def _pulls(x: np.ndarray, outer: Outer, body: ClosestPoint, floor: float, settings: SqueezeSettings):
     """Vertices of ``x (V, 3)`` outside ``outer`` where it covers them, and their targets:
     (indices (K,), targets (K, 3))."""
     cand = np.flatnonzero(outer.near & outer.covered)
@@ -79,9 +81,9 @@ def _pulls(x: np.ndarray, outer: Outer, body: ClosestPoint, settings: SqueezeSet
     c = body.query(p).point
     span = np.linalg.norm(p - c, axis=1)
     # Bisection on the kept fraction s of the distance to the body: the largest s with the vertex
-    # inside the outer mesh by the margin, at least margin / distance (the outer layer is then on the
+    # inside the outer mesh by the margin, at least floor / distance (the outer layer is then on the
     # skin there and the repair lifts it over this one).
-    lo = np.minimum(settings.margin / np.maximum(span, 1e-12), 1.0)  # always allowed
+    lo = np.minimum(floor / np.maximum(span, 1e-12), 1.0)  # always allowed
     hi = np.ones(len(idx))  # outside
     for _ in range(BISECTIONS):
         mid = 0.5 * (lo + hi)
@@ -95,10 +97,11 @@ def squeeze_layer(
     faces: np.ndarray,
     outer: list[Outer],
     body: ClosestPoint,
+    floor: float,
     settings: SqueezeSettings = SqueezeSettings(),
 ) -> SqueezeResult:
     """Pull garment ``vertices (V, 3)``, ``faces (F, 3)`` towards the ``body`` mesh, inside the
-    ``outer`` layers that cover it."""
+    ``outer`` layers that cover it, but no closer to the body than ``floor`` (m)."""
     x0 = np.asarray(vertices, dtype=np.float64)
     x = x0.copy()
     adjacency = vertex_neighbours(np.asarray(faces), len(x))
@@ -107,7 +110,7 @@ def squeeze_layer(
         u = np.zeros_like(x)
         held = np.zeros(len(x), dtype=bool)
         for layer in outer:
-            idx, target = _pulls(x + u, layer, body, settings)
+            idx, target = _pulls(x + u, layer, body, floor, settings)
             u[idx] = target - x[idx]
             held[idx] = True
         outside = int(held.sum())

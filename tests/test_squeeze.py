@@ -22,7 +22,7 @@ def _squeeze(inner_z: float, outer_z: float, settings: SqueezeSettings | None = 
     covered = v[:, 0] < 0  # the outer layer covers the half x < 0 (a waistband along x = 0)
     near = np.ones(len(v), dtype=bool)
     settings = settings or SqueezeSettings()
-    return v, f, outer, squeeze_layer(v, f, [Outer(outer, near, covered)], body, settings)
+    return v, f, outer, squeeze_layer(v, f, [Outer(outer, near, covered)], body, settings.margin, settings)
 
 
 def test_a_loose_inner_layer_is_pressed_under_the_outer_one_where_it_covers_it():
@@ -60,3 +60,14 @@ def test_an_outer_layer_on_the_skin_leaves_the_inner_one_at_the_margin_for_the_r
     covered = v[:, 0] < -0.03
     np.testing.assert_allclose(r.vertices[covered, 2], settings.margin, atol=1e-9)
     assert r.outside > 0
+
+
+def test_the_floor_keeps_room_for_the_garments_under_the_squeezed_one():
+    # The third garment of a stack stops 6 mm off the body, where an outer layer on the skin leaves it.
+    settings = SqueezeSettings()
+    body = ClosestPoint.build(*_sheet(30, 0.5, 0.0))
+    outer = ClosestPoint.build(*_sheet(24, 0.4, 0.001))
+    v, f = _sheet(20, 0.3, 0.02)
+    everywhere = np.ones(len(v), dtype=bool)
+    r = squeeze_layer(v, f, [Outer(outer, everywhere, everywhere)], body, 3 * settings.margin, settings)
+    np.testing.assert_allclose(r.vertices[:, 2], 3 * settings.margin, atol=1e-9)
