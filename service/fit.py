@@ -68,6 +68,9 @@ class FitResult:
     residual_after: float  # m, the same after (fields re-evaluated)
     seconds: dict[str, float] = field(default_factory=dict)  # fields / untangle / optimise
     ok: bool = True  # False when the optimiser failed; vertices then hold the best valid iterate
+    values: tuple[np.ndarray, np.ndarray] | None = None
+    """(f*, h*) ``(V, N)`` of every layer at the returned vertices, h* as the networks answer (far
+    layers not made inactive), for the later stages to reuse; None when ``ok`` is False."""
 
 
 def vertex_neighbours(faces: np.ndarray, n_vertices: int):
@@ -107,8 +110,9 @@ def fit_garment(
     adjacency = vertex_neighbours(faces, len(x0))
     clock = _Clock(seconds)
     with clock("fields"):
-        f_star, h_star = _values(fields, n_layers, x0, layer, settings.reach)
-    if not (np.all(np.isfinite(f_star)) and np.all(np.isfinite(h_star))):
+        f_star, h_raw = _values(fields, n_layers, x0)
+        h_star = np.where(far_layers(f_star, layer, settings.reach), INACTIVE, h_raw)
+    if not (np.all(np.isfinite(f_star)) and np.all(np.isfinite(h_raw))):
         # A network answered NaN or inf: nothing to fit against; the explicit mesh, flagged.
         return FitResult(x0.copy(), np.zeros(len(x0), dtype=bool), 0, 0, np.nan, np.nan, seconds, False)
     with clock("untangle"):
@@ -151,23 +155,23 @@ def fit_garment(
             break
         x[idx] = y
         with clock("fields"):
-            f_new, h_new = _values(fields, n_layers, x[idx], layer, settings.reach)
+            f_new, h_new = _values(fields, n_layers, x[idx])
         if not (np.all(np.isfinite(f_new)) and np.all(np.isfinite(h_new))):
             ok = False
             break
-        f_star[idx], h_star[idx] = f_new, h_new
+        f_star[idx], h_raw[idx] = f_new, h_new
+        h_star[idx] = np.where(far_layers(f_new, layer, settings.reach), INACTIVE, h_new)
         with clock("untangle"):
             residual[idx] = untangler(f_star[idx], h_star[idx], False)[0][:, layer] - target[idx]
-    return FitResult(
-        x, optimised, iterations, linearisations, before, float(np.abs(residual).max()), seconds, ok
-    )
+    values = (f_star, h_raw) if ok else None
+    after = float(np.abs(residual).max())
+    return FitResult(x, optimised, iterations, linearisations, before, after, seconds, ok, values)
 
 
-def _values(fields: LayerFields, n_layers: int, x: np.ndarray, layer: int, reach: float):
-    """f*, h* ``(P, N)`` of every layer at ``x (P, 3)``, values only, far layers made inactive."""
+def _values(fields: LayerFields, n_layers: int, x: np.ndarray):
+    """f*, h* ``(P, N)`` of every layer at ``x (P, 3)``, values only."""
     vals = [fields(k, x, False) for k in range(n_layers)]
-    f, h = np.stack([v.f for v in vals], 1), np.stack([v.h for v in vals], 1)
-    return f, np.where(far_layers(f, layer, reach), INACTIVE, h)
+    return np.stack([v.f for v in vals], 1), np.stack([v.h for v in vals], 1)
 
 
 def _linearise(fields: LayerFields, n_layers: int, x: np.ndarray, f_now: np.ndarray, layer: int, reach):

@@ -168,8 +168,10 @@ def make_outfit(
     fit_world, repairs = world, []
     if untangle_layers and repair:
         t0 = time.perf_counter()
-        world, repairs = _untangle_world(models, layer_ids, beta, body, explicit, fitted, world, faces,
-                                         repair_settings)  # fmt: skip
+        # Every layer's fields at every fitted vertex, as the fit left them (None: evaluate again).
+        cache = [r.values if r.ok else None for r in fits]
+        world, repairs = _untangle_world(models, layer_ids, beta, body, explicit, (fitted, cache), world,
+                                         faces, repair_settings)  # fmt: skip
         seconds["repair"] = time.perf_counter() - t0
     outfit = Outfit(body, models.body.faces, list(zip(garment_ids, world, faces, strict=True)))
     report = {"garments": garment_ids, "beta": beta.tolist(), "untangled": untangle_layers}
@@ -200,17 +202,28 @@ def make_outfit(
     return outfit
 
 
+def _field_at(models, layer_ids, beta, fitted, k: int, i: int):
+    """Layer ``k``'s fields (f, h ``(V,)``) at garment ``i``'s fitted canonical vertices: from the fit's
+    values where it left them, else evaluated (values only)."""
+    vertices, cache = fitted
+    if cache[i] is not None:
+        return cache[i][0][:, k], cache[i][1][:, k]
+    v = models.fields(layer_ids[k], vertices[i], beta)
+    return v.f, v.h
+
+
 def _untangle_world(models, layer_ids, beta, body, explicit, fitted, world, faces, settings: RepairSettings):
     """The squeeze then the repair of the fitted world meshes; where faults are left, again from the
     repaired meshes, up to ``PASSES`` times (the repair lifted an outer layer over an inner one that the
     squeeze can now press under it: four tops on a heavy body, 123 crossing pairs in the armpits after
     the first pass, 0 after the second). Returns the meshes with the fewest crossings, then vertices
-    inside, and their ``RepairResult``s."""
+    inside, and their ``RepairResult``s. ``fitted`` is (fitted canonical vertices, the fits' field
+    values or None) per garment (``_field_at``)."""
     best = None
     start = world
     body_mesh = ClosestPoint.build(body, models.body.faces)
     for _ in range(PASSES):
-        squeezed = _squeeze(models, layer_ids[1:], beta, fitted, start, faces, body_mesh)
+        squeezed = _squeeze(models, layer_ids, beta, fitted, start, faces, body_mesh)
         meshes = (explicit, fitted, world, squeezed, faces)
         out, results = _repair(models, layer_ids, beta, body_mesh, *meshes, settings)
         # Crossings first: a vertex left inside an inner layer is within the quality bound (0.1 %)
@@ -224,7 +237,7 @@ def _untangle_world(models, layer_ids, beta, body, explicit, fitted, world, face
     return best[1], best[2]
 
 
-def _squeeze(models, garment_ids, beta, fitted, world, faces, body: ClosestPoint) -> list[np.ndarray]:
+def _squeeze(models, layer_ids, beta, fitted, world, faces, body: ClosestPoint) -> list[np.ndarray]:
     """World meshes with every garment pulled inside the outer ones that cover it (``service.squeeze``),
     from the outermost inwards. Where an outer garment covers a vertex and how far it is comes from the
     outer garment's fields at the vertex's fitted canonical position, as in ``_repair``."""
@@ -233,13 +246,13 @@ def _squeeze(models, garment_ids, beta, fitted, world, faces, body: ClosestPoint
     for j in range(len(out) - 2, -1, -1):
         outer = []
         for i in range(j + 1, len(out)):
-            v = models.fields(garment_ids[i], fitted[j], beta)
-            near = np.abs(v.f) < REACH
-            if not (near & (v.h < 0)).any():
+            f, h = _field_at(models, layer_ids, beta, fitted, i + 1, j)
+            near = np.abs(f) < REACH
+            if not (near & (h < 0)).any():
                 continue
             if i not in meshes:
                 meshes[i] = ClosestPoint.build(out[i], faces[i])
-            outer.append(Outer(meshes[i], near, v.h < 0))
+            outer.append(Outer(meshes[i], near, h < 0))
         if outer:
             floor = (j + 1) * DEFAULT_SQUEEZE.margin  # room for the garments under this one
             r = squeeze_layer(out[j], faces[j], outer, body, floor, DEFAULT_SQUEEZE)
@@ -251,27 +264,27 @@ def _repair(models, layer_ids, beta, body: ClosestPoint, explicit, fitted, fit_w
     """Repaired world meshes and their ``RepairResult``s, each layer against the final inner ones.
 
     Which vertices can be near an inner layer, and where it covers them, comes from the fields at the
-    layer's fitted canonical vertices (values only; the learned body field is enough for that). The
+    layer's fitted canonical vertices (``_field_at``: those the fit left, values only). The
     fields are those of the explicit meshes: an inner garment that its fit and repair moved by up to
     s is looked for within ``REACH`` + s."""
-    inner = [(body, True, BODY, 0.0)]
+    inner = [(body, True, 0.0)]
     out, results = [], []
     for i, (x, f) in enumerate(zip(world, faces, strict=True)):
         layers = []
-        for mesh, closed, field_id, moved in inner:
-            v = models.fields(field_id, fitted[i], beta)
+        for k, (mesh, closed, moved) in enumerate(inner):
+            f_k, h_k = _field_at(models, layer_ids, beta, fitted, k, i)
             reach = REACH + moved
-            near = v.f < reach if closed else np.abs(v.f) < reach
-            layers.append(Inner(mesh, closed, near, v.h < 0))
+            near = f_k < reach if closed else np.abs(f_k) < reach
+            layers.append(Inner(mesh, closed, near, h_k < 0))
         r = repair_layer(x, f, layers, settings)
         out.append(r.vertices if np.all(np.isfinite(r.vertices)) else x)
         results.append(r)
         # How far this layer now is from its explicit mesh, whose fields the outer layers see: the fit
         # moved it in canonical space (x 1.2 for the stretch of the body map), the squeeze and the
         # repair in world space.
-        fit_move = float(np.linalg.norm(fitted[i] - explicit[i], axis=1).max())
+        fit_move = float(np.linalg.norm(fitted[0][i] - explicit[i], axis=1).max())
         moved = 1.2 * fit_move + float(np.linalg.norm(out[-1] - fit_world[i], axis=1).max())
-        inner.append((ClosestPoint.build(out[-1], f), False, layer_ids[i + 1], moved))
+        inner.append((ClosestPoint.build(out[-1], f), False, moved))
     return out, results
 
 

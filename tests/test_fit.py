@@ -172,3 +172,15 @@ def test_far_layers_are_never_asked_for_gradients_and_do_not_change_the_fit():
     alone = fit_garment(v, f, 1, 2, flat2, reference)
     assert asked and all(k != 2 for k, _ in asked)
     np.testing.assert_allclose(with_far.vertices, alone.vertices, atol=1e-12)
+
+
+def test_the_values_a_fit_returns_are_the_fields_at_its_vertices():
+    # The squeeze and the repair reuse them instead of evaluating the networks again.
+    v, f = _sheet(n=8, z=0.009)
+    fields = planes([0.0, 0.010, 0.008])
+    res = fit_garment(v, f, 2, 3, fields, reference)
+    assert res.ok and res.optimised.any()
+    for k in range(3):
+        now = fields(k, res.vertices, False)
+        np.testing.assert_allclose(res.values[0][:, k], now.f, atol=1e-15)
+        np.testing.assert_array_equal(res.values[1][:, k], now.h)
