@@ -12,15 +12,23 @@ width that grows with the distance. The closest-point term makes it exact on the
 Gaussian term takes over further out, where closest points jump across the medial axis
 (between the legs, under the arms). Both are linear in D, so the transfer is a fixed sparse
 matrix per point set (``TransferWeights``) applied to any number of shapes.
+
+``transfer_weights_reference`` computes the weights as written; ``transfer_weights`` gives the same
+ones (to rounding) with less work, on two threads. A grid of B~s per corner body (like
+``service.sdf_grid``) would be cheaper still but misses by up to 4.9 mm at 6 mm spacing: the
+truncations to the 32 nearest vertices and the 8 nearest triangles make B~s jump by ~0.1-1 mm
+wherever those sets change, which trilinear interpolation cannot follow.
 """
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
 
 from service.closest import ClosestPoint
+from service.triangle_table import TriangleTable
 
 BLEND_DISTANCE = 0.03  # m: beyond it only the smooth term remains
 NEIGHBOURS = 32
@@ -28,6 +36,7 @@ SIGMA_MIN = 0.01  # m: Gaussian width at the surface; grows as SIGMA_MIN + dista
 NEAR_VERTICES = 6  # candidate triangles come from the rings of this many nearest vertices
 NEAR_TRIANGLES = 8  # of which the closest this many share the near term
 SOFTNESS = 0.5  # soft-min width of the near term, as a fraction of the distance
+CHUNK = 2048  # points per block of the fast transfer (measured: 1-2k best on 10k garment vertices)
 
 
 @dataclass
@@ -57,14 +66,78 @@ class CanonicalSpace:
     mean_vertices: np.ndarray  # (V, 3) float64, the body at the canonical shape
     faces: np.ndarray  # (F, 3)
     closest: ClosestPoint
+    triangles: TriangleTable
+    threads: int = 2  # for transfer_weights
 
     @classmethod
-    def build(cls, mean_vertices: np.ndarray, faces: np.ndarray) -> CanonicalSpace:
+    def build(cls, mean_vertices: np.ndarray, faces: np.ndarray, threads: int = 2) -> CanonicalSpace:
         closest = ClosestPoint.build(mean_vertices, faces)
-        return cls(closest.vertices, closest.faces, closest)
+        table = TriangleTable.build(closest.vertices, closest.faces)
+        return cls(closest.vertices, closest.faces, closest, table, threads)
 
     def transfer_weights(self, points: np.ndarray) -> TransferWeights:
-        """Weights for canonical ``points (N, 3)``."""
+        """Weights for canonical ``points (N, 3)``: those of ``transfer_weights_reference`` (to rounding,
+        ``tests/test_canonical.py``) at ~3x its speed on two cores.
+
+        Blocks of CHUNK points run on ``threads`` threads: numpy and the KD-tree release the GIL, and
+        a block's (C, 48) temporaries stay in cache.
+        """
+        points = np.asarray(points, dtype=np.float64)
+        if points.ndim != 2 or points.shape[1] != 3:
+            raise ValueError(f"points must be (N, 3), got {points.shape}")
+        blocks = np.array_split(points, max(1, round(len(points) / CHUNK)))
+        if len(blocks) == 1 or self.threads <= 1:
+            parts = [self._transfer_weights_block(b, workers=self.threads) for b in blocks]
+        else:
+            with ThreadPoolExecutor(self.threads) as pool:
+                parts = list(pool.map(self._transfer_weights_block, blocks))
+        return TransferWeights(
+            np.concatenate([t.index for t in parts]), np.concatenate([t.weight for t in parts])
+        )
+
+    def _transfer_weights_block(self, points: np.ndarray, workers: int = 1) -> TransferWeights:
+        """``transfer_weights`` of ``points (N, 3) float64`` with less work than the reference.
+
+        One nearest-vertex query serves both terms (its first NEAR_VERTICES columns are the near
+        term's vertices); each distinct (point, triangle) pair is tested once with ``TriangleTable``,
+        squared distances only, and barycentric coordinates only for the NEAR_TRIANGLES chosen; those
+        are found by partition, not sort (the soft-min does not depend on their order). A triangle in
+        the rings of several near vertices keeps one slot per ring, as in the reference: it weighs
+        more in the soft-min.
+        """
+        n = len(points)
+        k = min(NEIGHBOURS, len(self.mean_vertices))
+        vdist, far_index = self.closest.tree.query(points, k=k, workers=workers)
+        vdist, far_index = vdist.reshape(n, k), far_index.reshape(n, k)
+        ring = self.closest.ring[far_index[:, :NEAR_VERTICES]]  # (N, NEAR_VERTICES, R)
+        cand = np.sort(ring.reshape(n, ring.shape[1] * ring.shape[2]), axis=1)
+        first = cand >= 0  # padding (-1) sorts first and is never tested
+        first[:, 1:] &= cand[:, 1:] != cand[:, :-1]
+        rows, cols = np.nonzero(first)
+        d2_unique = self.triangles.closest(points[rows], cand[rows, cols], bary=False)
+        slot = np.cumsum(first.ravel()).reshape(first.shape) - 1  # each slot's pair, in nonzero's order
+        d2 = np.where(cand >= 0, d2_unique[np.maximum(slot, 0)], np.inf)  # (N, C) per ring slot
+        m = min(NEAR_TRIANGLES, d2.shape[1])
+        chosen = np.argpartition(d2, m - 1, axis=1)[:, :m]
+        cand, d2 = np.take_along_axis(cand, chosen, 1), np.take_along_axis(d2, chosen, 1)
+        bary, _ = self.triangles.closest(np.repeat(points, m, 0), np.maximum(cand, 0).ravel())
+        d0_2 = d2.min(axis=1, keepdims=True)
+        d0 = np.sqrt(d0_2)
+        tau = np.maximum(SOFTNESS * d0, 1e-9)
+        soft = np.where(np.isfinite(d2), np.exp(-0.5 * (d2 - d0_2) / tau**2), 0.0)
+        soft /= soft.sum(axis=1, keepdims=True)
+        near_index = self.faces[np.maximum(cand, 0)].reshape(n, 3 * m)
+        near_weight = (soft[:, :, None] * bary.reshape(n, m, 3)).reshape(n, 3 * m)
+        sigma = SIGMA_MIN + 0.5 * d0
+        gauss = np.exp(-0.5 * ((vdist**2 - vdist[:, :1] ** 2) / sigma**2))
+        gauss /= gauss.sum(axis=1, keepdims=True)
+        s = _smoothstep(d0 / BLEND_DISTANCE)
+        index = np.concatenate([near_index, far_index], axis=1)
+        weight = np.concatenate([(1 - s) * near_weight, s * gauss], axis=1)
+        return TransferWeights(index, weight)
+
+    def transfer_weights_reference(self, points: np.ndarray) -> TransferWeights:
+        """Weights for canonical ``points (N, 3)`` straight from the definition (module docstring)."""
         points = np.asarray(points, dtype=np.float64)
         # Near term: closest points on the triangles around the nearest vertices, soft-minimised
         # with a width proportional to the distance. On the surface the width is 0 (exact);

@@ -4,9 +4,10 @@ import numpy as np
 import pytest
 
 from service.body import DEFAULT_BETA, BodyModel
-from service.canonical import CanonicalSpace
-from service.closest import ClosestPoint, closest_point_reference
+from service.canonical import CHUNK, CanonicalSpace
+from service.closest import ClosestPoint, closest_on_triangles, closest_point_reference
 from service.mesh import unique_edges, vertex_normals
+from service.triangle_table import TriangleTable
 
 
 @pytest.fixture(scope="module")
@@ -83,3 +84,45 @@ def test_to_canonical_inverts_to_body(body, space):
     back, residual = space.to_canonical(y, other)
     assert residual < 1e-3
     assert np.median(np.linalg.norm(back - x, axis=1)) < 1e-5
+
+
+def test_triangle_table_matches_the_reference_closest_points(body):
+    """``TriangleTable`` (the fast transfer's triangle test) against Ericson's Voronoi regions, on
+    the body's triangles and on degenerate ones (a zero-area sliver and a collapsed triangle)."""
+    _, v, f = body
+    rng = np.random.default_rng(3)
+    face = rng.integers(0, len(f), 5000)
+    tri = v[f[face]]
+    tri[:50, 2] = tri[:50, 0] + 0.3 * (tri[:50, 1] - tri[:50, 0])  # collinear
+    tri[50:60, 1:] = tri[50:60, :1]  # a point
+    points = tri.mean(axis=1) + rng.normal(0, 0.02, (len(face), 3))
+    table = TriangleTable.build(tri.reshape(-1, 3), np.arange(3 * len(face)).reshape(-1, 3))
+    bary, d2 = table.closest(points, np.arange(len(face)))
+    ref = closest_on_triangles(points, tri[:, 0], tri[:, 1], tri[:, 2])
+    ref_point = np.einsum("mk,mkd->md", ref, tri)
+    np.testing.assert_allclose(np.sqrt(d2), np.linalg.norm(points - ref_point, axis=1), atol=1e-12)
+    np.testing.assert_allclose(np.einsum("mk,mkd->md", bary, tri), ref_point, atol=1e-12)
+    np.testing.assert_allclose(bary.sum(axis=1), 1.0, atol=1e-12)
+    np.testing.assert_allclose(table.closest(points, np.arange(len(face)), bary=False), d2)
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+def test_fast_transfer_matches_the_reference(body, space, threads):
+    """The fast transfer (one shared neighbour query, distinct pairs tested once, partition, blocks on
+    threads) gives the reference's displacement to rounding: on the surface, near it, inside, up to
+    15 cm out (where only the far term is left) and for more points than one block."""
+    model, mean, f = body
+    fast = CanonicalSpace(space.mean_vertices, space.faces, space.closest, space.triangles, threads)
+    rng = np.random.default_rng(4)
+    n = CHUNK + 1500
+    face = rng.integers(0, len(f), n)
+    on = np.einsum("nk,nkd->nd", rng.dirichlet([1, 1, 1], n), mean[f[face]])
+    normal = vertex_normals(mean, f)[f[face, 0]]
+    points = on + normal * rng.uniform(-0.01, 0.15, (n, 1))
+    points[:200] = on[:200]
+    for beta in ([0.0, 0.12, 1.0], [1.0, 0.72, 0.0]):
+        d = model.vertices(np.array(beta)) - mean
+        ref = space.transfer_weights_reference(points).apply(d)
+        got = fast.transfer_weights(points).apply(d)
+        np.testing.assert_allclose(got, ref, rtol=0, atol=1e-10)
+    assert fast.transfer_weights(points[:0]).weight.shape[0] == 0
