@@ -76,13 +76,10 @@ class ExplicitOnnx:
     """The exported explicit model run by onnxruntime: what the service uses."""
 
     def __init__(self, garment_id: str, directory: Path | None = None, threads: int = 1):
-        import onnxruntime as ort  # lazy: only the serving path needs it
+        from service.onnx_session import open_session
 
         path = Path(directory or models_dir() / "explicit") / f"{garment_id}.onnx"
-        options = ort.SessionOptions()
-        options.intra_op_num_threads = threads
-        options.enable_cpu_mem_arena = False
-        self.session = ort.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
+        self.session = open_session(path, threads)
 
     def canonical(self, beta: np.ndarray) -> np.ndarray:
         """Canonical garment vertices ``(V, 3)`` float64 for one beta ``(3,)``."""

@@ -21,6 +21,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from service.onnx_session import open_session
 from service.paths import models_dir
 
 BODY = "body"
@@ -55,19 +56,6 @@ class FieldValues(NamedTuple):
     grad_h: np.ndarray | None
 
 
-def _session(path: Path, threads: int):
-    import onnxruntime as ort  # lazy: only the serving path needs it
-
-    options = ort.SessionOptions()
-    options.intra_op_num_threads = threads
-    options.inter_op_num_threads = 1
-    # onnxruntime's CPU arena keeps each session's largest batch for ever: 15 sessions held ~600 MB
-    # after one outfit of every garment (benchmarks/memory.py). Without it, freed buffers go back to
-    # malloc, which every session shares.
-    options.enable_cpu_mem_arena = False
-    return ort.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
-
-
 BATCH = 8192  # points per onnxruntime call
 
 
@@ -77,8 +65,8 @@ class NeuralField:
     def __init__(self, field_id: str, directory: Path | None = None, threads: int = 2):
         directory = Path(directory or default_directory())
         self.field_id = field_id
-        self._values = _session(directory / values_file(field_id), threads)
-        self._gradient = _session(directory / gradient_file(field_id), threads)
+        self._values = open_session(directory / values_file(field_id), threads)
+        self._gradient = open_session(directory / gradient_file(field_id), threads)
 
     def __call__(self, x: np.ndarray, beta: np.ndarray, gradient: bool = False) -> FieldValues:
         """Fields at ``x (P, 3)`` for one shape ``beta (3,)``."""

@@ -61,18 +61,13 @@ class NeuralUntangler:
     """onnxruntime sessions of the exported network; ``__call__`` pads to the 5 slots and back."""
 
     def __init__(self, directory: Path | None = None, threads: int = 2):
-        import onnxruntime as ort  # lazy: only the serving path needs it
+        from service.onnx_session import open_session
 
         directory = Path(directory or default_directory())
         self.config = json.loads((directory / CONFIG_FILE).read_text())
         self.delta = float(self.config["delta"])
-        options = ort.SessionOptions()
-        options.intra_op_num_threads = threads
-        options.inter_op_num_threads = 1
-        options.enable_cpu_mem_arena = False  # as the fields' sessions (service.fields._session)
         self._values, self._jacobian = (
-            ort.InferenceSession(str(directory / name), options, providers=["CPUExecutionProvider"])
-            for name in (VALUES_FILE, JACOBIAN_FILE)
+            open_session(directory / name, threads) for name in (VALUES_FILE, JACOBIAN_FILE)
         )
 
     def __call__(self, f_star, h_star, jacobian: bool = True) -> NeuralUntangleOutput:
