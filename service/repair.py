@@ -45,6 +45,10 @@ class Inner:
     closed: bool  # the body: inside is inside, at any depth
     near: np.ndarray  # (V,) bool: outer vertices that may come within reach of it (others never move)
     covered: np.ndarray  # (V,) bool: outer vertices it covers (its h < 0 there); all for the body
+    query: np.ndarray | None = None
+    """(V,) bool: the near vertices that may be inside it or within the margin, whose closest points
+    the pushes need (None: all near ones). Vertices of triangles found crossing it are asked too,
+    whatever this says: the exact crossing tests cover every near triangle."""
 
 
 @dataclass(frozen=True)
@@ -77,26 +81,26 @@ class RepairResult:
 
 
 class _Queries:
-    """The closest points of one inner layer at the outer layer's near vertices, kept between rounds:
-    a vertex that did not move gets its last answer (the query is a function of the point alone)."""
+    """The closest points of one inner layer at outer vertices, kept between rounds: a vertex that did
+    not move gets its last answer (the query is a function of the point alone)."""
 
     def __init__(self, inner: Inner):
+        n = len(inner.near)
         self.mesh = inner.mesh
-        self.near = np.flatnonzero(inner.near)
-        self.points = np.full((len(self.near), 3), np.nan)  # NaN: never asked
-        self.signed = np.zeros(len(self.near))
-        self.point = np.zeros((len(self.near), 3))
-        self.normal = np.zeros((len(self.near), 3))
+        self.points = np.full((n, 3), np.nan)  # NaN: never asked
+        self.signed = np.zeros(n)
+        self.point = np.zeros((n, 3))
+        self.normal = np.zeros((n, 3))
 
-    def at(self, x: np.ndarray) -> _Queries:
-        """Bring the answers up to date with the near vertices of ``x (V, 3)``."""
-        points = x[self.near]
-        stale = np.flatnonzero(np.any(points != self.points, axis=1))
+    def at(self, x: np.ndarray, ask: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(signed distance (K,), closest point (K, 3), normal (K, 3)) at the vertices ``ask (K,)`` of
+        ``x (V, 3)``, querying only those that moved since they were last asked."""
+        stale = ask[np.any(x[ask] != self.points[ask], axis=1)]
         if len(stale):
-            q = self.mesh.query(points[stale])
-            self.points[stale] = points[stale]
+            q = self.mesh.query(x[stale])
+            self.points[stale] = x[stale]
             self.signed[stale], self.point[stale], self.normal[stale] = q.signed, q.point, q.normal
-        return self
+        return self.signed[ask], self.point[ask], self.normal[ask]
 
 
 def _pushes(x: np.ndarray, inner: Inner, margin: np.ndarray, band: float, forced: np.ndarray, queries=None):
@@ -105,19 +109,20 @@ def _pushes(x: np.ndarray, inner: Inner, margin: np.ndarray, band: float, forced
     crossing triangles: inside the inner layer they move out even where its covariant field says it
     does not cover them (a T-shirt's hem poking through the pants it is tucked into). ``queries``
     (a ``_Queries`` of ``inner``) keeps the closest points of the vertices that did not move."""
-    q = (queries or _Queries(inner)).at(x)
-    near = q.near
+    ask = inner.near if inner.query is None else inner.near & (inner.query | forced)
+    near = np.flatnonzero(ask)
     if not len(near):
         return near, np.zeros((0, 3)), 0
-    inside = q.signed < 0
+    signed, point, normal = (queries or _Queries(inner)).at(x, near)
+    inside = signed < 0
     # A vertex pushed to the margin last round lands a rounding error short of it: 10 % slack stops
     # the loop from pushing it again and again by nothing.
-    short = q.signed < 0.9 * margin[near]
+    short = signed < 0.9 * margin[near]
     covered = inner.covered[near] | forced[near]
-    bad = short & (inner.closed | ~inside | ((q.signed > -band) & covered))
+    bad = short & (inner.closed | ~inside | ((signed > -band) & covered))
     idx = near[bad]
     # Out along the face normal from the closest point, to the margin.
-    return idx, q.point[bad] + margin[idx, None] * q.normal[bad], int((bad & inside).sum())
+    return idx, point[bad] + margin[idx, None] * normal[bad], int((bad & inside).sum())
 
 
 def _faces_around(mesh: ClosestPoint, triangles: np.ndarray, pad: float) -> np.ndarray:

@@ -10,8 +10,8 @@ operator splits a violation between both layers too, but the fit moves a vertex 
 
 So, from the outermost garment inwards, every vertex of a garment that an outer garment covers (its
 covariant field h < 0 at the vertex) and that lies outside that outer mesh, by less than ``band``,
-moves straight towards its closest body point until it is ``margin`` inside the outer mesh (bisection
-on the fraction of its distance to the body it keeps, never closer to the body than ``floor``: the
+moves straight towards its closest body point until it is ``margin`` inside the outer mesh (a walk in
+steps of its signed distance, never closer to the body than ``floor``: the
 caller keeps one margin per garment under it, so that a stack of squeezed layers does not collapse
 onto the skin, where the repair would have to lift them apart again).
 Towards the body rather than along the outer layer's normal: in a concave crease of the outer layer
@@ -62,7 +62,7 @@ class SqueezeResult:
     outside: int  # covered vertices still outside an outer layer (within band) at the end
 
 
-BISECTIONS = 6  # the kept fraction to 1/64: ~0.5 mm for a vertex 3 cm off the body
+STEPS = 4  # of the walk towards the body; a vertex still outside after them waits for the next round
 
 
 def _pulls(x: np.ndarray, outer: Outer, body: ClosestPoint, floor: float, settings: SqueezeSettings):
@@ -79,17 +79,27 @@ def _pulls(x: np.ndarray, outer: Outer, body: ClosestPoint, floor: float, settin
         return idx, np.zeros((0, 3))
     p = x[idx]
     c = body.query(p).point
-    span = np.linalg.norm(p - c, axis=1)
-    # Bisection on the kept fraction s of the distance to the body: the largest s with the vertex
-    # inside the outer mesh by the margin, at least floor / distance (the outer layer is then on the
-    # skin there and the repair lifts it over this one).
-    lo = np.minimum(floor / np.maximum(span, 1e-12), 1.0)  # always allowed
-    hi = np.ones(len(idx))  # outside
-    for _ in range(BISECTIONS):
-        mid = 0.5 * (lo + hi)
-        inside = outer.mesh.query(c + mid[:, None] * (p - c)).signed < -settings.margin
-        lo, hi = np.where(inside, mid, lo), np.where(inside, hi, mid)
-    return idx, c + lo[:, None] * (p - c)
+    span = np.maximum(np.linalg.norm(p - c, axis=1), 1e-12)
+    # Walk the kept fraction s of the distance to the body down from 1: the signed distance changes at
+    # most as fast as the point moves, so a step of (distance + margin) never passes the margin inside
+    # the outer layer, and meets it exactly where the walk is along the outer layer's normal; obliquely
+    # it takes a few steps. Never below floor / distance (the outer layer is then on the skin there
+    # and the repair lifts it over this one).
+    low = np.minimum(floor / span, 1.0)
+    s = np.ones(len(idx))
+    signed = q.signed[bad]
+    walking = np.arange(len(idx))
+    for _ in range(STEPS):
+        s[walking] = np.maximum(low[walking], s[walking] - (signed + settings.margin) / span[walking])
+        walking = walking[s[walking] > low[walking]]
+        if not len(walking):
+            break
+        signed = outer.mesh.query(c[walking] + s[walking, None] * (p - c)[walking]).signed
+        keep = signed > -0.9 * settings.margin
+        walking, signed = walking[keep], signed[keep]
+        if not len(walking):
+            break
+    return idx, c + s[:, None] * (p - c)
 
 
 def squeeze_layer(

@@ -85,14 +85,16 @@ def test_kept_queries_answer_as_fresh_ones_after_some_vertices_move():
     n = len(outer_v)
     near = np.arange(n) % 3 > 0
     layer = Inner(ClosestPoint.build(inner_v, inner_f), False, near, _everywhere(n))
-    kept = _Queries(layer).at(outer_v)
+    kept = _Queries(layer)
+    ask = np.flatnonzero(near)
+    kept.at(outer_v, ask)
     moved = outer_v.copy()
     moved[::5] += [0.0, 0.0, 0.003]
-    kept.at(moved)
+    signed, point, normal = kept.at(moved, ask)
     fresh = layer.mesh.query(moved[near])
-    np.testing.assert_array_equal(kept.signed, fresh.signed)
-    np.testing.assert_array_equal(kept.point, fresh.point)
-    np.testing.assert_array_equal(kept.normal, fresh.normal)
+    np.testing.assert_array_equal(signed, fresh.signed)
+    np.testing.assert_array_equal(point, fresh.point)
+    np.testing.assert_array_equal(normal, fresh.normal)
 
 
 def test_diffusion_on_the_free_rows_is_the_whole_product_bit_for_bit():
@@ -112,3 +114,30 @@ def test_diffusion_on_the_free_rows_is_the_whole_product_bit_for_bit():
         mean = (adjacency @ expected) / np.maximum(degree, 1)[:, None]
         expected = np.where((region & ~held)[:, None], mean, expected)
     np.testing.assert_array_equal(_diffuse(u, held, region, adjacency, 8), expected)
+
+
+def test_a_query_subset_holding_every_violation_repairs_as_all_near_vertices_do():
+    inner_v, inner_f = _sheet(20, 0.4, lambda v: 0.0 * v[:, 0])
+    outer_v, outer_f = _sheet(
+        24, 0.36, lambda v: 0.01 - 0.016 * np.exp(-(v[:, 0] ** 2 + v[:, 1] ** 2) / 0.03**2)
+    )
+    n = len(outer_v)
+    mesh = ClosestPoint.build(inner_v, inner_f)
+    full = repair_layer(outer_v, outer_f, [Inner(mesh, False, _everywhere(n), _everywhere(n))])
+    dent = outer_v[:, 2] < 0.008  # every vertex the dent brings within the margin, and more
+    part = repair_layer(outer_v, outer_f, [Inner(mesh, False, _everywhere(n), _everywhere(n), dent)])
+    assert full.crossing_pairs == part.crossing_pairs == 0
+    np.testing.assert_array_equal(part.vertices, full.vertices)
+
+
+def test_vertices_left_out_of_the_queries_are_asked_once_their_triangles_cross():
+    inner_v, inner_f = _sheet(20, 0.4, lambda v: 0.0 * v[:, 0])
+    outer_v, outer_f = _sheet(
+        24, 0.36, lambda v: 0.01 - 0.016 * np.exp(-(v[:, 0] ** 2 + v[:, 1] ** 2) / 0.03**2)
+    )
+    n = len(outer_v)
+    nothing = np.zeros(n, dtype=bool)  # a wrong hint: no vertex asked at first
+    layer = Inner(ClosestPoint.build(inner_v, inner_f), False, _everywhere(n), _everywhere(n), nothing)
+    r = repair_layer(outer_v, outer_f, [layer])
+    assert r.crossing_pairs == 0
+    assert len(intersecting_pairs(r.vertices, outer_f, inner_v, inner_f)) == 0
