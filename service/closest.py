@@ -196,6 +196,38 @@ class ClosestPoint:
     def pseudo(self) -> PseudoNormals:
         return PseudoNormals.build(self.vertices, self.faces, self.fn)
 
+    @cached_property
+    def boundary_edges(self) -> np.ndarray:
+        """Sorted keys ``min * V + max`` of the edges with one triangle (an open mesh's rims)."""
+        n_v = len(self.vertices)
+        e = np.concatenate([self.faces[:, [0, 1]], self.faces[:, [1, 2]], self.faces[:, [2, 0]]])
+        keys, count = np.unique(np.minimum(e[:, 0], e[:, 1]) * n_v + np.maximum(e[:, 0], e[:, 1]),
+                                return_counts=True)  # fmt: skip
+        return keys[count == 1]
+
+    def on_boundary(self, c: Closest) -> np.ndarray:
+        """``(N,) bool``: closest points ``c`` lying on the mesh's boundary (a rim edge or its ends).
+
+        There the point is past the mesh's edge rather than on one of its sides: the pseudo-normal's
+        sign says little (a point below a T-shirt's hem reads as inside it)."""
+        zero = c.bary <= 1e-12
+        tri = self.faces[c.face]
+        n_v = len(self.vertices)
+        out = np.zeros(len(c.face), dtype=bool)
+        if not len(self.boundary_edges):
+            return out
+        rim_vertex = np.zeros(n_v, dtype=bool)
+        rim_vertex[self.boundary_edges // n_v] = True
+        rim_vertex[self.boundary_edges % n_v] = True
+        vert = zero.sum(axis=1) == 2
+        out[vert] = rim_vertex[tri[vert][~zero[vert]]]
+        edge = zero.sum(axis=1) == 1
+        ends = tri[edge][~zero[edge]].reshape(-1, 2)
+        keys = ends.min(axis=1) * n_v + ends.max(axis=1)
+        pos = np.clip(np.searchsorted(self.boundary_edges, keys), 0, len(self.boundary_edges) - 1)
+        out[edge] = self.boundary_edges[pos] == keys
+        return out
+
     def candidates(self, points: np.ndarray, k: int = 4) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Closest points of ``points (N, 3)`` on each triangle around their k nearest vertices.
 

@@ -2,7 +2,10 @@
 
 - penetration of garment j: the share of its vertices on the wrong side of an inner layer: inside the
   body (exact signed distance to the body mesh), or on an inner garment's body side, within
-  ``PENETRATION_BAND`` of it, where that garment is active (its covariant field h < 0 at the vertex);
+  ``PENETRATION_BAND`` of it, where that garment is active (its covariant field h < 0 at the vertex).
+  A vertex whose closest point on the inner garment lies on its rim (a hem, an armhole) is past the
+  garment's edge, on neither side: the sign there is only the rim face's orientation, and it had
+  counted a T-shirt's sleeve leaving a tank top's armhole as inside the tank top;
 - intersections: intersecting triangle pairs between every two layers (exact edge-triangle tests).
 """
 
@@ -39,8 +42,9 @@ def penetration(layers: list[Layer], h_at: Callable[[int, int], np.ndarray]) -> 
         x = layers[j].vertices
         wrong = closest[0].query(x).signed < 0
         for i in range(1, j):
-            d = closest[i].query(x).signed
-            wrong |= (d < 0) & (d > -PENETRATION_BAND) & (h_at(i, j) < 0)
+            q = closest[i].query(x)
+            d = q.signed
+            wrong |= (d < 0) & (d > -PENETRATION_BAND) & (h_at(i, j) < 0) & ~closest[i].on_boundary(q)
         out[layers[j].id] = float(wrong.mean())
     return out
 

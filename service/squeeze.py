@@ -53,6 +53,10 @@ class SqueezeSettings:
     ring: int = 3
     smoothing: int = 12
     rounds: int = 3
+    relax: int = 4
+    """Jacobi iterations over the whole moved patch, pulled vertices included, after the diffusion:
+    neighbours pulled towards different sides of an armpit (torso and arm) otherwise part ways and
+    crumple the cloth between them; relaxed, the patch moves as one and the next round pulls again."""
 
 
 @dataclass
@@ -126,6 +130,8 @@ def squeeze_layer(
         outside = int(held.sum())
         if not outside or _ == settings.rounds:
             break
-        u = diffuse(u, held, dilate(held, adjacency, settings.ring), adjacency, settings.smoothing)
+        region = dilate(held, adjacency, settings.ring)
+        u = diffuse(u, held, region, adjacency, settings.smoothing)
+        u = diffuse(u, np.zeros_like(held), region, adjacency, settings.relax)
         x += u
     return SqueezeResult(x, np.any(x != x0, axis=1), outside)

@@ -90,7 +90,7 @@ def test_kept_queries_answer_as_fresh_ones_after_some_vertices_move():
     kept.at(outer_v, ask)
     moved = outer_v.copy()
     moved[::5] += [0.0, 0.0, 0.003]
-    signed, point, normal = kept.at(moved, ask)
+    signed, point, normal, _ = kept.at(moved, ask)
     fresh = layer.mesh.query(moved[near])
     np.testing.assert_array_equal(signed, fresh.signed)
     np.testing.assert_array_equal(point, fresh.point)
