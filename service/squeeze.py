@@ -81,17 +81,20 @@ def _pulls(x: np.ndarray, outer: Outer, body: ClosestPoint, floor: float, settin
     idx = cand[bad]
     if not len(idx):
         return idx, np.zeros((0, 3))
-    p = x[idx]
-    c = body.query(p).point
+    qb = body.query(x[idx])
+    keep = qb.signed > 0  # a vertex inside the body is the repair's to move, outwards
+    idx, p, c = idx[keep], x[idx[keep]], qb.point[keep]
+    if not len(idx):
+        return idx, np.zeros((0, 3))
     span = np.maximum(np.linalg.norm(p - c, axis=1), 1e-12)
     # Walk the kept fraction s of the distance to the body down from 1: the signed distance changes at
     # most as fast as the point moves, so a step of (distance + margin) never passes the margin inside
     # the outer layer, and meets it exactly where the walk is along the outer layer's normal; obliquely
     # it takes a few steps. Never below floor / distance (the outer layer is then on the skin there
     # and the repair lifts it over this one).
-    low = np.minimum(floor / span, 1.0)
+    low = floor / span  # above 1 where the vertex is already under the floor: out to it
     s = np.ones(len(idx))
-    signed = q.signed[bad]
+    signed = q.signed[bad][keep]
     walking = np.arange(len(idx))
     for _ in range(STEPS):
         s[walking] = np.maximum(low[walking], s[walking] - (signed + settings.margin) / span[walking])
@@ -120,7 +123,7 @@ def squeeze_layer(
     x = x0.copy()
     adjacency = vertex_neighbours(np.asarray(faces), len(x))
     outside = 0
-    for _ in range(settings.rounds + 1):
+    for round_ in range(settings.rounds + 1):
         u = np.zeros_like(x)
         held = np.zeros(len(x), dtype=bool)
         for layer in outer:
@@ -128,10 +131,11 @@ def squeeze_layer(
             u[idx] = target - x[idx]
             held[idx] = True
         outside = int(held.sum())
-        if not outside or _ == settings.rounds:
+        if not outside or round_ == settings.rounds:
             break
         region = dilate(held, adjacency, settings.ring)
         u = diffuse(u, held, region, adjacency, settings.smoothing)
-        u = diffuse(u, np.zeros_like(held), region, adjacency, settings.relax)
+        if round_ < settings.rounds - 1:  # the last round puts the pulled vertices where they belong
+            u = diffuse(u, np.zeros_like(held), region, adjacency, settings.relax)
         x += u
     return SqueezeResult(x, np.any(x != x0, axis=1), outside)
