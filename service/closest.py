@@ -268,6 +268,32 @@ class ClosestPoint:
         )
 
 
+class KeptQueries:
+    """Closest points on one mesh for a fixed set of ``n`` moving points (a garment's vertices), kept
+    between calls: a point that did not move gets its last answer (the query is a function of the
+    point alone), so the repair's and the squeeze's rounds only ask for what they moved."""
+
+    def __init__(self, mesh: ClosestPoint, n: int):
+        self.mesh = mesh
+        self.points = np.full((n, 3), np.nan)  # NaN: never asked
+        self.signed = np.zeros(n)
+        self.point = np.zeros((n, 3))
+        self.normal = np.zeros((n, 3))
+        self.rim = np.zeros(n, dtype=bool)
+
+    def at(self, x: np.ndarray, ask: np.ndarray):
+        """(signed distance (K,), closest point (K, 3), face normal (K, 3), closest point on the mesh's
+        rim (K,) bool) at the points ``ask (K,)`` of ``x (n, 3)``, querying only those that moved since
+        they were last asked."""
+        stale = ask[np.any(x[ask] != self.points[ask], axis=1)]
+        if len(stale):
+            q = self.mesh.query(x[stale])
+            self.points[stale] = x[stale]
+            self.signed[stale], self.point[stale], self.normal[stale] = q.signed, q.point, q.normal
+            self.rim[stale] = self.mesh.on_boundary(q)
+        return self.signed[ask], self.point[ask], self.normal[ask], self.rim[ask]
+
+
 def signed_distance(closest: ClosestPoint, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(signed distance (P,), its gradient (P, 3)) to a closed mesh at ``x (P, 3)``: the unit vector
     from the closest point, or the face normal on the surface itself."""

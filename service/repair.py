@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from service.closest import ClosestPoint
+from service.closest import ClosestPoint, KeptQueries
 from service.fit import dilate, vertex_neighbours
 from service.intersections import TriangleGrid
 from service.mesh import vertex_normals
@@ -80,43 +80,17 @@ class RepairResult:
     log: list[dict] = field(default_factory=list)
 
 
-class _Queries:
-    """The closest points of one inner layer at outer vertices, kept between rounds: a vertex that did
-    not move gets its last answer (the query is a function of the point alone)."""
-
-    def __init__(self, inner: Inner):
-        n = len(inner.near)
-        self.mesh = inner.mesh
-        self.points = np.full((n, 3), np.nan)  # NaN: never asked
-        self.signed = np.zeros(n)
-        self.point = np.zeros((n, 3))
-        self.normal = np.zeros((n, 3))
-        self.rim = np.zeros(n, dtype=bool)
-
-    def at(self, x: np.ndarray, ask: np.ndarray):
-        """(signed distance (K,), closest point (K, 3), normal (K, 3), closest point on the layer's rim
-        (K,) bool) at the vertices ``ask (K,)`` of ``x (V, 3)``, querying only those that moved since
-        they were last asked."""
-        stale = ask[np.any(x[ask] != self.points[ask], axis=1)]
-        if len(stale):
-            q = self.mesh.query(x[stale])
-            self.points[stale] = x[stale]
-            self.signed[stale], self.point[stale], self.normal[stale] = q.signed, q.point, q.normal
-            self.rim[stale] = self.mesh.on_boundary(q)
-        return self.signed[ask], self.point[ask], self.normal[ask], self.rim[ask]
-
-
 def _pushes(x: np.ndarray, inner: Inner, margin: np.ndarray, band: float, forced: np.ndarray, queries=None):
     """The vertices of ``x (V, 3)`` that violate ``margin (V,)`` against ``inner``, where they go, and
     how many are inside it: (indices (K,), targets (K, 3), count). ``forced (V,)`` marks vertices of
     crossing triangles: inside the inner layer they move out even where its covariant field says it
     does not cover them (a T-shirt's hem poking through the pants it is tucked into). ``queries``
-    (a ``_Queries`` of ``inner``) keeps the closest points of the vertices that did not move."""
+    (``KeptQueries`` of ``inner.mesh``) keeps the closest points of the vertices that did not move."""
     ask = inner.near if inner.query is None else inner.near & (inner.query | forced)
     near = np.flatnonzero(ask)
     if not len(near):
         return near, np.zeros((0, 3)), 0
-    signed, point, normal, rim = (queries or _Queries(inner)).at(x, near)
+    signed, point, normal, rim = (queries or KeptQueries(inner.mesh, len(x))).at(x, near)
     inside = signed < 0
     # A vertex pushed to the margin last round lands a rounding error short of it: 10 % slack stops
     # the loop from pushing it again and again by nothing.
@@ -175,7 +149,7 @@ def repair_layer(
         )
         for layer, t in zip(inner, tested, strict=True)
     ]
-    queries = [_Queries(layer) for layer in inner]
+    queries = [KeptQueries(layer.mesh, len(x)) for layer in inner]
     # Crossing pairs (tested triangle, inner triangle) of each layer, and the vertices they were
     # found at: a triangle none of whose vertices moved keeps its pairs (the inner layers are fixed).
     hits = [np.zeros((0, 2), dtype=np.int64) for _ in inner]

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from service.closest import ClosestPoint
+from service.closest import ClosestPoint, KeptQueries
 from service.fit import dilate, vertex_neighbours
 from service.quality import PENETRATION_BAND
 from service.repair import _diffuse as diffuse  # noqa: PLC2701 (made public once the repair settles)
@@ -69,21 +69,22 @@ class SqueezeResult:
 STEPS = 4  # of the walk towards the body; a vertex still outside after them waits for the next round
 
 
-def _pulls(x: np.ndarray, outer: Outer, body: ClosestPoint, floor: float, settings: SqueezeSettings):
-    """Vertices of ``x (V, 3)`` outside ``outer`` where it covers them, and their targets:
-    (indices (K,), targets (K, 3))."""
+def _pulls(x: np.ndarray, outer: Outer, kept: KeptQueries, body: KeptQueries, floor: float, settings):
+    """Vertices of ``x (V, 3)`` outside ``outer`` where it covers them, and their targets: (indices
+    (K,), targets (K, 3)). ``kept`` and ``body`` keep the closest points on the outer layer and on the
+    body of the vertices that did not move since the last round."""
     cand = np.flatnonzero(outer.near & outer.covered)
     if not len(cand):
         return cand, np.zeros((0, 3))
-    q = outer.mesh.query(x[cand])
+    signed_out = kept.at(x, cand)[0]
     # 10 % slack, as in the repair: a vertex pulled to the margin lands a rounding error short of it.
-    bad = (q.signed > -0.9 * settings.margin) & (q.signed < settings.band)
+    bad = (signed_out > -0.9 * settings.margin) & (signed_out < settings.band)
     idx = cand[bad]
     if not len(idx):
         return idx, np.zeros((0, 3))
-    qb = body.query(x[idx])
-    keep = qb.signed > 0  # a vertex inside the body is the repair's to move, outwards
-    idx, p, c = idx[keep], x[idx[keep]], qb.point[keep]
+    signed_body, point_body = body.at(x, idx)[:2]
+    keep = signed_body > 0  # a vertex inside the body is the repair's to move, outwards
+    idx, p, c = idx[keep], x[idx[keep]], point_body[keep]
     if not len(idx):
         return idx, np.zeros((0, 3))
     span = np.maximum(np.linalg.norm(p - c, axis=1), 1e-12)
@@ -94,7 +95,7 @@ def _pulls(x: np.ndarray, outer: Outer, body: ClosestPoint, floor: float, settin
     # and the repair lifts it over this one).
     low = floor / span  # above 1 where the vertex is already under the floor: out to it
     s = np.ones(len(idx))
-    signed = q.signed[bad][keep]
+    signed = signed_out[bad][keep]
     walking = np.arange(len(idx))
     for _ in range(STEPS):
         s[walking] = np.maximum(low[walking], s[walking] - (signed + settings.margin) / span[walking])
@@ -122,12 +123,14 @@ def squeeze_layer(
     x0 = np.asarray(vertices, dtype=np.float64)
     x = x0.copy()
     adjacency = vertex_neighbours(np.asarray(faces), len(x))
+    kept = [KeptQueries(layer.mesh, len(x)) for layer in outer]
+    on_body = KeptQueries(body, len(x))
     outside = 0
     for round_ in range(settings.rounds + 1):
         u = np.zeros_like(x)
         held = np.zeros(len(x), dtype=bool)
-        for layer in outer:
-            idx, target = _pulls(x + u, layer, body, floor, settings)
+        for layer, queries in zip(outer, kept, strict=True):
+            idx, target = _pulls(x + u, layer, queries, on_body, floor, settings)
             u[idx] = target - x[idx]
             held[idx] = True
         outside = int(held.sum())

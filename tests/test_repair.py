@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import trimesh
 
-from service.closest import ClosestPoint
+from service.closest import ClosestPoint, KeptQueries
 from service.intersections import intersecting_pairs
 from service.repair import Inner, RepairSettings, repair_layer
 from tests.meshes import grid_mesh
@@ -78,14 +78,12 @@ def test_degenerate_triangles_stay_finite_through_the_repair():
 
 
 def test_kept_queries_answer_as_fresh_ones_after_some_vertices_move():
-    from service.repair import _Queries
-
     inner_v, inner_f = _sheet(20, 0.4, lambda v: 0.01 * np.sin(20 * v[:, 0]))
     outer_v, _ = _sheet(24, 0.36, lambda v: 0.005 + 0.0 * v[:, 0])
     n = len(outer_v)
     near = np.arange(n) % 3 > 0
     layer = Inner(ClosestPoint.build(inner_v, inner_f), False, near, _everywhere(n))
-    kept = _Queries(layer)
+    kept = KeptQueries(layer.mesh, n)
     ask = np.flatnonzero(near)
     kept.at(outer_v, ask)
     moved = outer_v.copy()
