@@ -19,12 +19,17 @@ import logging
 
 log = logging.getLogger(__name__)
 
-M_TRIM_THRESHOLD, M_TOP_PAD, M_MMAP_THRESHOLD = -1, -2, -3  # glibc malloc.h
+M_TRIM_THRESHOLD, M_TOP_PAD, M_MMAP_THRESHOLD, M_ARENA_MAX = -1, -2, -3, -8  # glibc malloc.h
 MMAP_THRESHOLD = 32 << 20  # bytes: blocks up to this size stay in the heap when freed
 TRIM_THRESHOLD = 64 << 20  # bytes of free heap top kept instead of returned to the kernel
 # Any mallopt call turns off glibc's sliding thresholds, so these must cover onnxruntime's buffers too
 # (a batch of 8,192 points with gradients takes ~12 MB per layer): at a 4 MiB threshold a field at
 # 30,000 points took 25 ms instead of 15 ms, its buffers mapped and unmapped on every call.
+ARENA_MAX = 2
+# Each malloc arena keeps up to TRIM_THRESHOLD free; glibc makes up to 8 per core for the threads
+# that allocate (onnxruntime's, the body map's, the server's). Two bound what the heap keeps: the
+# server with the whole catalog used held 548 MB with glibc's default and 351 MB with two
+# (benchmarks/memory.py), at the same latency.
 _tuned = {"done": False, "limits": None}
 
 
@@ -43,7 +48,7 @@ def tune_process(blas_threads: int = 1) -> dict[str, bool]:
         applied["malloc"] = all(
             mallopt(param, value) == 1
             for param, value in ((M_MMAP_THRESHOLD, MMAP_THRESHOLD), (M_TRIM_THRESHOLD, TRIM_THRESHOLD),
-                                 (M_TOP_PAD, 4 << 20))
+                                 (M_TOP_PAD, 4 << 20), (M_ARENA_MAX, ARENA_MAX))
         )  # fmt: skip
     try:
         from threadpoolctl import threadpool_limits
