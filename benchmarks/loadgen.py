@@ -94,7 +94,11 @@ class LocalServer:
 def _proc_tree(pid: int) -> Iterator[int]:
     yield pid
     for task in Path(f"/proc/{pid}/task").iterdir():
-        for child in (task / "children").read_text().split():
+        try:  # a thread can end between the listing and the read (the body map's short-lived pool)
+            children = (task / "children").read_text().split()
+        except (FileNotFoundError, ProcessLookupError):
+            continue
+        for child in children:
             yield from _proc_tree(int(child))
 
 
