@@ -8,7 +8,8 @@ vertices, and ``closest_point_reference`` checks every triangle.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, fields
 from functools import cached_property
 
 import numpy as np
@@ -228,14 +229,16 @@ class ClosestPoint:
         out[edge] = self.boundary_edges[pos] == keys
         return out
 
-    def candidates(self, points: np.ndarray, k: int = 4) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def candidates(
+        self, points: np.ndarray, k: int = 4, workers: int = -1
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Closest points of ``points (N, 3)`` on each triangle around their k nearest vertices.
 
         Returns (faces (N, C) int, bary (N, C, 3), distance (N, C)), padding slots at +inf distance.
         """
         points = _check_points(points)
         k = min(k, len(self.vertices))
-        _, near = self.tree.query(points, k=k, workers=-1)
+        _, near = self.tree.query(points, k=k, workers=workers)
         near = near.reshape(len(points), k)
         cand = self.ring[near].reshape(len(points), -1)  # (N, k R)
         valid = cand >= 0
@@ -258,14 +261,40 @@ class ClosestPoint:
         return cand, w, np.where(valid, d, np.inf)
 
     def query(self, points: np.ndarray, k: int = 4) -> Closest:
-        """Closest points of ``points (N, 3)`` on the mesh."""
+        """Closest points of ``points (N, 3)`` on the mesh.
+
+        Over ``QUERY_BLOCK`` points, blocks run on ``QUERY_THREADS`` threads (numpy and the KD-tree
+        release the GIL; each point's answer depends on that point alone, so the result is the same
+        bit for bit): the repair's and the squeeze's queries are most of a request's time.
+        """
         points = _check_points(points)
-        cand, w, d = self.candidates(points, k)
+        if len(points) <= QUERY_BLOCK or QUERY_THREADS <= 1:
+            return self._query_block(points, k)
+        # Build the lazy structures here: cached_property is not safe to fill from two threads.
+        _ = self.ring, self.tree, self.fn, self.pseudo
+        blocks = np.array_split(points, -(-len(points) // QUERY_BLOCK))
+        parts = list(_pool().map(lambda b: self._query_block(b, k, workers=1), blocks))
+        return Closest(*(np.concatenate([getattr(p, f.name) for p in parts]) for f in fields(Closest)))
+
+    def _query_block(self, points: np.ndarray, k: int, workers: int = -1) -> Closest:
+        cand, w, d = self.candidates(points, k, workers)
         best = np.argmin(d, axis=1)
         rows = np.arange(len(points))
         return _finish(
             points, self.vertices, self.faces, self.fn, cand[rows, best], w[rows, best], self.pseudo
         )
+
+
+QUERY_BLOCK = 2048
+QUERY_THREADS = 2
+_POOL: list[ThreadPoolExecutor] = []
+
+
+def _pool() -> ThreadPoolExecutor:
+    """The query threads, started once per process."""
+    if not _POOL:
+        _POOL.append(ThreadPoolExecutor(QUERY_THREADS, thread_name_prefix="closest"))
+    return _POOL[0]
 
 
 class KeptQueries:

@@ -60,3 +60,16 @@ def test_query_matches_the_reference_inside_and_outside():
     np.testing.assert_allclose(got.distance, ref.distance, atol=1e-12)
     np.testing.assert_array_equal(np.sign(got.signed), np.sign(ref.signed))
     assert (got.signed < 0).any() and (got.signed > 0).any()
+
+
+def test_blocked_threaded_query_is_the_single_block_query_bit_for_bit(monkeypatch):
+    import service.closest as closest
+
+    sphere = trimesh.creation.icosphere(subdivisions=3, radius=0.1)
+    points = np.random.default_rng(3).normal(scale=0.12, size=(5000, 3))
+    monkeypatch.setattr(closest, "QUERY_BLOCK", 10**9)
+    whole = ClosestPoint.build(sphere.vertices, sphere.faces).query(points)
+    monkeypatch.setattr(closest, "QUERY_BLOCK", 700)  # 8 blocks on the threads
+    blocked = ClosestPoint.build(sphere.vertices, sphere.faces).query(points)
+    for name in ("face", "bary", "point", "distance", "signed", "normal"):
+        np.testing.assert_array_equal(getattr(blocked, name), getattr(whole, name))
