@@ -106,6 +106,19 @@ def _pushes(x: np.ndarray, inner: Inner, margin: np.ndarray, band: float, forced
     return idx, point[bad] + margin[idx, None] * normal[bad], int((bad & inside).sum())
 
 
+def _clear_of(x: np.ndarray, faces: np.ndarray, kept: KeptQueries) -> np.ndarray:
+    """``(F,) bool``: triangles ``faces (F, 3)`` of ``x (V, 3)`` that provably do not touch the mesh of
+    ``kept``: a vertex v farther from it than the triangle's longest edge L puts every point of the
+    triangle (within L of v) off the mesh. The distance of v comes from its last closest-point answer,
+    less how far v moved since; a vertex never asked proves nothing. Only the rest get the exact
+    crossing tests, the same pairs as testing them all."""
+    bound = np.abs(kept.signed) - np.linalg.norm(x - kept.points, axis=1)  # NaN where never asked
+    bound = np.where(np.isnan(bound), -np.inf, bound)
+    tri = x[faces]
+    longest = np.max(np.linalg.norm(tri - np.roll(tri, 1, axis=1), axis=2), axis=1)
+    return bound[faces].max(axis=1) > longest
+
+
 def _faces_around(mesh: ClosestPoint, triangles: np.ndarray, pad: float) -> np.ndarray:
     """Indices of ``mesh``'s faces with a vertex inside the bounding box of ``triangles (T, 3, 3)``
     grown by ``pad``."""
@@ -191,6 +204,7 @@ def repair_layer(
         tested_at = x.copy()
         for n, (t, grid) in enumerate(zip(tested, grids, strict=True)):
             again = np.flatnonzero(moved[faces[t]].any(axis=1))
+            again = again[~_clear_of(x, faces[t[again]], queries[n])]
             pairs = grid.crossing(x, faces[t[again]])
             pairs[:, 0] = again[pairs[:, 0]]
             hits[n] = np.concatenate([hits[n][~np.isin(hits[n][:, 0], again)], pairs])

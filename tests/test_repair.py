@@ -139,3 +139,27 @@ def test_vertices_left_out_of_the_queries_are_asked_once_their_triangles_cross()
     r = repair_layer(outer_v, outer_f, [layer])
     assert r.crossing_pairs == 0
     assert len(intersecting_pairs(r.vertices, outer_f, inner_v, inner_f)) == 0
+
+
+def test_pruning_triangles_clear_of_the_inner_layer_changes_nothing(monkeypatch):
+    import service.repair as repair
+
+    inner_v, inner_f = _sheet(20, 0.4, lambda v: 0.01 * np.sin(25 * v[:, 0]))
+    outer_v, outer_f = _sheet(
+        24, 0.36, lambda v: 0.012 - 0.02 * np.exp(-(v[:, 0] ** 2 + v[:, 1] ** 2) / 0.04**2)
+    )
+    n = len(outer_v)
+    layer = [Inner(ClosestPoint.build(inner_v, inner_f), False, _everywhere(n), _everywhere(n))]
+    pruned = repair_layer(outer_v, outer_f, layer)
+    cleared = repair._clear_of(outer_v, outer_f, _asked(layer[0], outer_v))
+    assert 0 < cleared.sum() < len(outer_f)  # the case prunes some triangles and keeps others
+    monkeypatch.setattr(repair, "_clear_of", lambda x, faces, kept: np.zeros(len(faces), dtype=bool))
+    full = repair_layer(outer_v, outer_f, layer)
+    assert pruned.crossing_pairs == full.crossing_pairs and pruned.rounds == full.rounds
+    np.testing.assert_array_equal(pruned.vertices, full.vertices)
+
+
+def _asked(layer: Inner, x: np.ndarray) -> KeptQueries:
+    kept = KeptQueries(layer.mesh, len(x))
+    kept.at(x, np.arange(len(x)))
+    return kept
