@@ -129,7 +129,7 @@ def _faces_around(mesh: ClosestPoint, triangles: np.ndarray, pad: float) -> np.n
     return np.flatnonzero(inside[mesh.faces].any(axis=1))
 
 
-def _diffuse(u: np.ndarray, held: np.ndarray, region: np.ndarray, adjacency, iterations: int) -> np.ndarray:
+def diffuse(u: np.ndarray, held: np.ndarray, region: np.ndarray, adjacency, iterations: int) -> np.ndarray:
     """Spread displacements ``u (V, 3)`` from ``held`` into ``region`` (both (V,) bool)."""
     free = np.flatnonzero(region & ~held)
     if not len(free):
@@ -197,7 +197,7 @@ def repair_layer(
             held |= bulge
         if held.any():
             region = dilate(held, adjacency, settings.ring)
-            u = _diffuse(u, held, region, adjacency, settings.smoothing)
+            u = diffuse(u, held, region, adjacency, settings.smoothing)
             x += u
         crossing, culprits = 0, []
         moved = np.any(x != tested_at, axis=1)

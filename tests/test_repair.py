@@ -97,7 +97,7 @@ def test_kept_queries_answer_as_fresh_ones_after_some_vertices_move():
 
 def test_diffusion_on_the_free_rows_is_the_whole_product_bit_for_bit():
     from service.fit import dilate, vertex_neighbours
-    from service.repair import _diffuse
+    from service.repair import diffuse
 
     v, f = _sheet(15, 0.3, lambda v: 0.0 * v[:, 0])
     adjacency = vertex_neighbours(f, len(v))
@@ -111,7 +111,7 @@ def test_diffusion_on_the_free_rows_is_the_whole_product_bit_for_bit():
     for _ in range(8):
         mean = (adjacency @ expected) / np.maximum(degree, 1)[:, None]
         expected = np.where((region & ~held)[:, None], mean, expected)
-    np.testing.assert_array_equal(_diffuse(u, held, region, adjacency, 8), expected)
+    np.testing.assert_array_equal(diffuse(u, held, region, adjacency, 8), expected)
 
 
 def test_a_query_subset_holding_every_violation_repairs_as_all_near_vertices_do():
