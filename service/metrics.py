@@ -32,11 +32,18 @@ class Metrics:
         self.queue_depth = Gauge("ulnef_queue_depth", "Outfits running or waiting for a worker.", registry=r)
         self.running = Gauge("ulnef_queue_running", "Outfits being computed.", registry=r)
         self.rejected = Counter(
-            "ulnef_outfit_rejected", "Outfit requests refused or abandoned, by reason.", ["reason"],
+            "ulnef_outfit_rejected",
+            "Outfit requests refused or abandoned, by reason.",
+            ["reason"],
             registry=r,
         )
         self.fallbacks = Counter(
             "ulnef_outfit_numerical_fallback", "Garments served unfitted after a numerical fault.", registry=r
+        )
+        self.with_crossings = Counter(
+            "ulnef_outfit_with_crossings",
+            "Outfits served with layers still crossing after the repair (report collision_free false).",
+            registry=r,
         )
         self.ready = Gauge("ulnef_ready", "1 once models are loaded and the self-test passed.", registry=r)
 

@@ -183,6 +183,11 @@ def make_outfit(
     if untangle_layers:
         report |= _fit_report(garment_ids, explicit, faces, fits, untangler)
     if repairs:
+        # What a client checks: the returned meshes cross nothing and no vertex is left inside an inner
+        # layer. False only for orders the repair could not make so (a jacket tucked into pants: its
+        # front hangs below the crotch; README, Outfits).
+        report["crossing_pairs"] = sum(r.crossing_pairs for r in repairs)
+        report["collision_free"] = all(r.crossing_pairs == 0 and r.inside == 0 for r in repairs)
         report["repair"] = {
             g: {
                 "moved_vertices": int(r.moved.sum()),

@@ -164,6 +164,8 @@ class TryOn:
         result = engine.make(spec)
         self.metrics.observe_stages(result.report.get("seconds", {}))
         self.metrics.fallbacks.inc(len(result.report.get("numerical_fallback", [])))
+        if result.report.get("collision_free") is False:
+            self.metrics.with_crossings.inc()
         self.cache.put(key, result)
         return result
 

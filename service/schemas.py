@@ -109,8 +109,14 @@ class OutfitCreated(BaseModel):
                 "id": "3f1c0d9e8b7a65544332211000ffeedd",
                 "glb_url": "/v1/outfits/3f1c0d9e8b7a65544332211000ffeedd.glb",
                 "cached": False,
-                "report": {"garments": ["tshirt"], "untangled": True, "numerical_fallback": [],
-                           "seconds": {"body": 0.0005, "total": 0.15}},  # fmt: skip
+                "report": {
+                    "garments": ["tshirt"],
+                    "untangled": True,
+                    "collision_free": True,
+                    "crossing_pairs": 0,
+                    "numerical_fallback": [],
+                    "seconds": {"body": 0.0005, "total": 0.15},
+                },  # fmt: skip
             }
         }
     )
@@ -119,8 +125,10 @@ class OutfitCreated(BaseModel):
     glb_url: str = Field(description="GET it for the GLB (while the outfit is in the cache).")
     cached: bool = Field(description="Whether the outfit came from the cache.")
     report: dict[str, Any] = Field(
-        description="Quality report: garments, beta, untangling statistics, `numerical_fallback` "
-        "(garments served unfitted after a numerical fault), `seconds` per pipeline stage."
+        description="Quality report: garments, beta, untangling statistics, `collision_free` (no "
+        "triangle pairs crossing between layers and no vertex left inside an inner layer after the "
+        "repair; `crossing_pairs` counts what is left), `numerical_fallback` (garments served unfitted "
+        "after a numerical fault), `seconds` per pipeline stage."
     )
 
 

@@ -68,10 +68,13 @@ class FakeEngine:
 
     model_version = "fake"
 
-    def __init__(self, catalog: dict[str, Garment], delay: float = 0.0, nan: bool = False):
+    def __init__(
+        self, catalog: dict[str, Garment], delay: float = 0.0, nan: bool = False, crossings: int = 0
+    ):
         self.catalog = catalog
         self.delay = delay
         self.nan = nan
+        self.crossings = crossings  # crossing pairs the fake repair leaves
         self.calls = 0
         self._lock = threading.Lock()
 
@@ -92,6 +95,7 @@ class FakeEngine:
             body = np.array([[0, 0, 0], [0.2, 0, 0], [0, 0, 1.7], [0, 0.2, 0]], dtype=np.float64)
             layers.insert(0, ("body", body, np.array([[0, 1, 2], [0, 2, 3], [0, 3, 1], [1, 3, 2]])))
         report = {"garments": list(spec.garments), "numerical_fallback": [],
+                  "collision_free": self.crossings == 0, "crossing_pairs": self.crossings,
                   "seconds": {"body": 0.0, "total": self.delay}}  # fmt: skip
         return OutfitResult(outfit_glb(layers), report)
 

@@ -23,13 +23,13 @@ GLB = "model/gltf-binary"
 TINY = {"garments": ["pants", "tshirt"], "body": {"gender": 0.0, "height_cm": 180, "weight_kg": 80}}
 
 
-def make_app(models_dir: Path, delay: float = 0.0, **overrides):
+def make_app(models_dir: Path, delay: float = 0.0, crossings: int = 0, **overrides):
     values = dict(models_dir=models_dir, verify_models=False, configure_logging=False,
                   self_test_garments=[], self_test_untangle=False)  # fmt: skip
     engine = {}
 
     def factory(settings: Settings) -> FakeEngine:
-        engine["it"] = FakeEngine(load_catalog(settings.garments_dir()), delay=delay)
+        engine["it"] = FakeEngine(load_catalog(settings.garments_dir()), delay=delay, crossings=crossings)
         return engine["it"]
 
     app = create_app(Settings(**(values | overrides)), factory)
@@ -64,6 +64,17 @@ def test_post_answers_json_with_a_glb_url(app_and_engine):
     assert again["id"] == body["id"] and again["cached"] is True
     assert engine["it"].calls == 1
     assert 'ulnef_outfit_cache_total{result="hit"} 2.0' in client.get("/metrics").text
+
+
+def test_an_outfit_left_with_crossings_says_so_and_is_counted(fake_models_dir: Path):
+    app, _ = make_app(fake_models_dir, crossings=3)
+    with TestClient(app) as client:
+        assert app.state.tryon.wait_loaded(10)
+        report = client.post("/v1/outfits", json=TINY).json()["report"]
+        assert report["collision_free"] is False and report["crossing_pairs"] == 3
+        assert "ulnef_outfit_with_crossings_total 1.0" in client.get("/metrics").text
+        client.post("/v1/outfits", json=TINY)  # from the cache: counted once, when computed
+        assert "ulnef_outfit_with_crossings_total 1.0" in client.get("/metrics").text
 
 
 def test_post_answers_the_glb_itself_for_accept_glb(client: TestClient):

@@ -47,6 +47,7 @@ def test_tshirt_under_jacket_untangles(models, held_out_beta, untangler):
     assert pairs_after == 0, r["intersections_after"]
     assert pen_after <= 0.001, r["penetration_after"]
     assert all(v["crossing_pairs"] == 0 for v in r["repair"].values())
+    assert r["collision_free"] is True and r["crossing_pairs"] == 0
     assert r["fallback"] == []
     # Only the tangled regions move: the mean vertex moves by millimetres.
     assert max(r["mean_displacement_mm"].values()) < 5
