@@ -206,6 +206,15 @@ class ClosestPoint:
                                 return_counts=True)  # fmt: skip
         return keys[count == 1]
 
+    @cached_property
+    def boundary_vertices(self) -> np.ndarray:
+        """``(V,) bool``: the ends of the boundary edges."""
+        n_v = len(self.vertices)
+        out = np.zeros(n_v, dtype=bool)
+        out[self.boundary_edges // n_v] = True
+        out[self.boundary_edges % n_v] = True
+        return out
+
     def on_boundary(self, c: Closest) -> np.ndarray:
         """``(N,) bool``: closest points ``c`` lying on the mesh's boundary (a rim edge or its ends).
 
@@ -217,11 +226,8 @@ class ClosestPoint:
         out = np.zeros(len(c.face), dtype=bool)
         if not len(self.boundary_edges):
             return out
-        rim_vertex = np.zeros(n_v, dtype=bool)
-        rim_vertex[self.boundary_edges // n_v] = True
-        rim_vertex[self.boundary_edges % n_v] = True
         vert = zero.sum(axis=1) == 2
-        out[vert] = rim_vertex[tri[vert][~zero[vert]]]
+        out[vert] = self.boundary_vertices[tri[vert][~zero[vert]]]
         edge = zero.sum(axis=1) == 1
         ends = tri[edge][~zero[edge]].reshape(-1, 2)
         keys = ends.min(axis=1) * n_v + ends.max(axis=1)

@@ -69,6 +69,7 @@ class FitResult:
     residual_after: float  # m, the same after (fields re-evaluated)
     seconds: dict[str, float] = field(default_factory=dict)  # fields / untangle / optimise
     ok: bool = True  # False when the optimiser failed; vertices then hold the best valid iterate
+    rest: RestShape | None = None  # of the explicit mesh: the report's strain is measured against it
     values: tuple[np.ndarray, np.ndarray] | None = None
     """(f*, h*) ``(V, N)`` of every layer at the returned vertices, h* as the networks answer (far
     layers not made inactive), for the later stages to reuse; None when ``ok`` is False."""
@@ -166,7 +167,7 @@ def fit_garment(
             residual[idx] = untangler(f_star[idx], h_star[idx], False)[0][:, layer] - target[idx]
     values = (f_star, h_raw) if ok else None
     after = float(np.abs(residual).max())
-    return FitResult(x, optimised, iterations, linearisations, before, after, seconds, ok, values)
+    return FitResult(x, optimised, iterations, linearisations, before, after, seconds, ok, full_rest, values)
 
 
 def _values(fields: LayerFields, n_layers: int, x: np.ndarray):

@@ -211,7 +211,7 @@ def _fit_report(ids, explicit, faces, fits: list[FitResult], untangler: str) -> 
         disp = np.linalg.norm(r.vertices - x0, axis=1)
         out.setdefault("mean_displacement_mm", {})[g] = round(float(disp.mean()) * 1e3, 3)
         out.setdefault("max_displacement_mm", {})[g] = round(float(disp.max()) * 1e3, 3)
-        strain = green_strain_norms(r.vertices, RestShape.build(x0, f))
+        strain = green_strain_norms(r.vertices, r.rest or RestShape.build(x0, f))
         out.setdefault("mean_green_strain", {})[g] = round(float(strain.mean()), 6)
         out.setdefault("optimised_vertices", {})[g] = int(r.optimised.sum())
         out.setdefault("iterations", {})[g] = r.iterations

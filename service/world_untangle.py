@@ -15,11 +15,11 @@ from service.closest import ClosestPoint
 from service.repair import REACH, Inner, RepairSettings, repair_layer
 from service.squeeze import Outer, SqueezeSettings, squeeze_layer
 
-DEFAULT_REPAIR = RepairSettings()
 DEFAULT_SQUEEZE = SqueezeSettings()
 PASSES = 3
-BODY_QUERY_BAND = DEFAULT_REPAIR.max_margin + 0.01
-"""m: garment vertices the body's canonical distance puts farther out than this are not asked for their
+BODY_QUERY_PAD = 0.01
+"""m: garment vertices the body's canonical distance puts farther out than the repair's largest margin
+plus this are not asked for their
 closest body points in the repair. World and canonical distances to the body differ by < 6 mm at 99 %
 of garment vertices within 6 cm of 6 held-out bodies (one jacket vertex of 60,000: 38 mm, in an
 armpit); a vertex missed that way still gets asked once a triangle of it is found crossing."""
@@ -99,8 +99,8 @@ def _repair(models, layer_ids, beta, body: ClosestPoint, explicit, fitted, fit_w
             reach = REACH + moved
             near = f_k < reach if closed else np.abs(f_k) < reach
             # The body's distance is exact (canonical, a grid): only vertices it puts within
-            # BODY_QUERY_BAND can be within a margin of the body in world space.
-            query = f_k < BODY_QUERY_BAND if closed else None
+            # max_margin + BODY_QUERY_PAD can be within a margin of the body in world space.
+            query = f_k < settings.max_margin + BODY_QUERY_PAD if closed else None
             layers.append(Inner(mesh, closed, near, h_k < 0, query))
         r = repair_layer(x, f, layers, settings)
         out.append(r.vertices if np.all(np.isfinite(r.vertices)) else x)
