@@ -113,3 +113,26 @@ def test_a_field_answering_nan_gives_the_explicit_mesh_and_a_flag(models, held_o
     assert outfit.report["fallback"] == ["tshirt"]
     assert all(np.all(np.isfinite(v)) for _, v, _ in outfit.garments)
     json.dumps(outfit.report, allow_nan=False)  # what an HTTP answer needs
+
+
+def test_side_by_side_fits_equal_one_after_the_other(models, held_out_beta):
+    # make_outfit fits the garments on two threads: each fit depends only on its own garment and the
+    # fields, so the result must be the sequential fit's, bit for bit.
+    from service.fields import BODY
+    from service.fit import fit_garment
+    from service.outfit import DEFAULT_FIT
+
+    ids = ["pants", "tshirt", "jacket"]
+    out = make_outfit(models, ids, held_out_beta, measure=False, repair=False)
+    layer_ids = [BODY, *ids]
+
+    def layer_fields(k, x, gradient):
+        if k == 0:
+            return models.body_field(x, gradient)
+        return models.fields(layer_ids[k], x, held_out_beta, gradient)
+
+    op = models.untangler("neural")
+    for i, (gid, world, faces) in enumerate(out.garments):
+        x0 = models.explicit[gid].canonical(held_out_beta)
+        fitted = fit_garment(x0, faces, i + 1, len(layer_ids), layer_fields, op, DEFAULT_FIT).vertices
+        assert np.array_equal(world, models.space.to_body(fitted, out.body_vertices)), gid
