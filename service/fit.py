@@ -21,6 +21,8 @@ d f_i / dx = sum_k (d O_i / d f*_k) grad f*_k(x) + (d O_i / d h*_k) grad h*_k(x)
 
 from __future__ import annotations
 
+import hashlib
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -76,7 +78,30 @@ class FitResult:
 
 
 def vertex_neighbours(faces: np.ndarray, n_vertices: int):
-    """Sparse vertex adjacency ``(V, V)`` of ``faces (F, 3)``."""
+    """Sparse vertex adjacency ``(V, V)`` of ``faces (F, 3)`` (shared: do not modify it).
+
+    A garment's faces never change, and one request asks for its adjacency in the fit, the squeeze
+    and every repair pass: it is built once per distinct face array (by content) and kept."""
+    faces = np.ascontiguousarray(faces, dtype=np.int64)
+    key = (n_vertices, faces.shape, hashlib.sha1(faces.tobytes()).digest())
+    with _ADJACENCY_LOCK:
+        found = _ADJACENCY.get(key)
+    if found is None:
+        found = vertex_neighbours_reference(faces, n_vertices)
+        with _ADJACENCY_LOCK:
+            while len(_ADJACENCY) >= ADJACENCY_CACHE:
+                _ADJACENCY.pop(next(iter(_ADJACENCY)))  # the oldest
+            _ADJACENCY[key] = found
+    return found
+
+
+ADJACENCY_CACHE = 32  # face arrays kept: the catalog's garments and a few more
+_ADJACENCY: dict = {}
+_ADJACENCY_LOCK = threading.Lock()
+
+
+def vertex_neighbours_reference(faces: np.ndarray, n_vertices: int):
+    """``vertex_neighbours`` built afresh."""
     from scipy.sparse import coo_matrix
 
     e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])

@@ -184,3 +184,16 @@ def test_the_values_a_fit_returns_are_the_fields_at_its_vertices():
         now = fields(k, res.vertices, False)
         np.testing.assert_allclose(res.values[0][:, k], now.f, atol=1e-15)
         np.testing.assert_array_equal(res.values[1][:, k], now.h)
+
+
+def test_kept_adjacency_equals_a_fresh_one():
+    from service.fit import vertex_neighbours, vertex_neighbours_reference
+
+    _, f = grid_mesh(6)
+    n = int(f.max()) + 1
+    first, again = vertex_neighbours(f, n), vertex_neighbours(f.copy(), n)
+    assert again is first  # same faces by content: the kept matrix
+    assert (first != vertex_neighbours_reference(f, n)).nnz == 0
+    other = f[:, ::-1].copy()  # other faces (orientation flipped): its own entry, same edges
+    assert vertex_neighbours(other, n) is not first
+    assert vertex_neighbours(f, n + 1).shape == (n + 1, n + 1)
