@@ -182,7 +182,7 @@ def make_outfit(
         for key in ("fields", "untangle", "optimise"):
             seconds[key] = sum(r.seconds[key] for r in fits)
     t0 = time.perf_counter()
-    world = [models.space.to_body(x, body) for x in fitted]
+    world = models.space.to_bodies(fitted, body)
     seconds["world"] = time.perf_counter() - t0
     fit_world, repairs = world, []
     if untangle_layers and repair:
@@ -213,7 +213,7 @@ def make_outfit(
         }
     if measure:
         t0 = time.perf_counter()
-        before = [models.space.to_body(x, body) for x in explicit] if untangle_layers else world
+        before = models.space.to_bodies(explicit, body) if untangle_layers else world
         report |= _measures(models, layer_ids, body, beta, explicit, before, fitted, world, faces)
         if repairs:
             fit_only = _measures(models, layer_ids, body, beta, explicit, before, fitted, fit_world, faces)

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from service.body import DEFAULT_BETA, BodyModel
-from service.canonical import CHUNK, CanonicalSpace
+from service.canonical import CHUNK, NEAR_TRIANGLES, CanonicalSpace
 from service.closest import ClosestPoint, closest_on_triangles, closest_point_reference
 from service.mesh import unique_edges, vertex_normals
 from service.triangle_table import TriangleTable
@@ -104,13 +104,18 @@ def test_triangle_table_matches_the_reference_closest_points(body):
     np.testing.assert_allclose(np.einsum("mk,mkd->md", bary, tri), ref_point, atol=1e-12)
     np.testing.assert_allclose(bary.sum(axis=1), 1.0, atol=1e-12)
     np.testing.assert_allclose(table.closest(points, np.arange(len(face)), bary=False), d2)
+    # The transfer asks for the barycentric coordinates of chosen pairs only.
+    pick = rng.integers(0, len(face), (100, 8))
+    wb, wc = table.test(points, np.arange(len(face))).bary_bc(pick)
+    np.testing.assert_array_equal(np.stack([wb, wc], axis=2), bary[pick, 1:])
 
 
 @pytest.mark.parametrize("threads", [1, 2])
 def test_fast_transfer_matches_the_reference(body, space, threads):
     """The fast transfer (one shared neighbour query, distinct pairs tested once, partition, blocks on
-    threads) gives the reference's displacement to rounding: on the surface, near it, inside, up to
-    15 cm out (where only the far term is left) and for more points than one block."""
+    threads, no near term beyond BLEND_DISTANCE) gives the reference's displacement to rounding: on
+    the surface, near it, inside, up to 15 cm out (where only the far term is left) and for more
+    points than one block."""
     model, mean, f = body
     fast = CanonicalSpace(space.mean_vertices, space.faces, space.closest, space.triangles, threads)
     rng = np.random.default_rng(4)
@@ -125,4 +130,28 @@ def test_fast_transfer_matches_the_reference(body, space, threads):
         ref = space.transfer_weights_reference(points).apply(d)
         got = fast.transfer_weights(points).apply(d)
         np.testing.assert_allclose(got, ref, rtol=0, atol=1e-10)
+    # Where the near term is skipped, the reference's is exactly 0 too.
+    near = 3 * NEAR_TRIANGLES
+    skipped = ~fast.transfer_weights(points).weight[:, :near].any(axis=1)
+    assert 0 < skipped.sum() < n
+    assert not space.transfer_weights_reference(points[skipped]).weight[:, :near].any()
     assert fast.transfer_weights(points[:0]).weight.shape[0] == 0
+
+
+def test_to_bodies_carries_each_set_as_to_body_alone(body, space):
+    """A request's garments in one pass (``to_bodies``, its blocks cut across the sets) land where
+    each lands alone, bit for bit (``tests/test_outfit.py`` compares the pipeline's world meshes with
+    ``to_body`` exactly), and where the reference puts them."""
+    model, mean, _ = body
+    other = model.vertices(np.array([0.3, 0.8, 0.4]))
+    rng = np.random.default_rng(5)
+    sizes = (700, 0, CHUNK + 900, 1)
+    sets = [mean[rng.integers(0, len(mean), n)] + rng.normal(0, 0.03, (n, 3)) for n in sizes]
+    together = space.to_bodies(sets, other)
+    assert [len(y) for y in together] == [len(x) for x in sets]
+    for x, y in zip(sets, together, strict=True):
+        assert np.array_equal(y, space.to_body(x, other))
+    x = np.concatenate(sets)
+    ref = x + space.transfer_weights_reference(x).apply(other - mean)
+    np.testing.assert_allclose(np.concatenate(together), ref, rtol=0, atol=1e-10)
+    assert space.to_bodies([], other) == []
