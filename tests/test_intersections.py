@@ -1,5 +1,6 @@
-"""Tests of ``service/intersections.py``: the KD-tree path against the all-pairs reference on random
-meshes, and hand-made configurations whose answer is known."""
+"""Tests of ``service/intersections.py``: the KD-tree and grid paths against the all-pairs reference on
+random meshes and on touching and near-touching ones, and hand-made configurations whose answer is
+known."""
 
 from __future__ import annotations
 
@@ -9,6 +10,7 @@ import trimesh
 
 from service.intersections import (
     TriangleGrid,
+    cross,
     crossing_triangles,
     intersecting_pairs,
     intersecting_pairs_reference,
@@ -272,3 +274,95 @@ def test_crossing_triangles_is_triangles_intersect_bit_for_bit():
     fast = crossing_triangles(ta, tb, na, nb)
     np.testing.assert_array_equal(fast, triangles_intersect(ta, tb))
     assert 100 < fast.sum() < 3900
+
+
+def test_cross_is_np_cross_bit_for_bit():
+    rng = np.random.default_rng(11)
+    u = rng.normal(size=(5000, 3)) * 10.0 ** rng.integers(-8, 9, size=(5000, 3))
+    v = rng.normal(size=(5000, 3)) * 10.0 ** rng.integers(-8, 9, size=(5000, 3))
+    u[:500] = 3 * v[:500]  # parallel
+    u[500:1000, 2], v[500:1000, 2] = 0.0, -0.0  # signed zeros
+    np.testing.assert_array_equal(cross(u, v).view(np.int64), np.cross(u, v).view(np.int64))
+
+
+def _box_triangles(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Triangles (vertices, faces) whose bounding boxes are exactly ``lo..hi (N, 3)``."""
+    n = len(lo)
+    vertices = np.concatenate([lo, hi, np.stack([lo[:, 0], hi[:, 1], lo[:, 2]], axis=1)])
+    return vertices, np.arange(3 * n).reshape(3, n).T
+
+
+@pytest.mark.parametrize("cell", [None, 0.25, 0.1, 1e-9])
+def test_grid_candidates_are_the_overlapping_boxes_each_once(cell: float | None):
+    # Boxes on a lattice of 1/8: with cells of 1/4 their sides fall on cell and step boundaries and
+    # many touch exactly. Some span many cells, some are flat, some queries lie outside the grid or
+    # straddle its side, and some end one float below a grid box (the steps tie, the floats decide).
+    rng = np.random.default_rng(5)
+
+    def boxes(n: int, size: int) -> tuple[np.ndarray, np.ndarray]:
+        lo = rng.integers(-2, 9, size=(n, 3)) / 8
+        return lo, lo + rng.integers(0, size, size=(n, 3)) / 8
+
+    grid_lo, grid_hi = boxes(300, 4)
+    grid_lo[:20], grid_hi[:20] = boxes(20, 12)
+    lo, hi = boxes(400, 4)
+    lo[:30] += 3.0
+    hi[:30] += 3.0
+    lo[30:60] -= 0.5
+    below = rng.integers(0, 300, size=40)
+    hi[60:100] = np.nextafter(grid_lo[below], -np.inf)
+    lo[60:100] = hi[60:100] - 0.2
+    grid = TriangleGrid.build(*_box_triangles(grid_lo, grid_hi), cell)
+    i, j = grid.candidates(lo, hi)
+    expected = np.all((lo[:, None] <= grid_hi[None]) & (grid_lo[None] <= hi[:, None]), axis=2)
+    assert len(i) == len(pair_set(np.stack([i, j], axis=1)))  # each pair once
+    assert pair_set(np.stack([i, j], axis=1)) == pair_set(np.argwhere(expected))
+    assert expected.sum() > 1000
+
+
+def _sheet(n: int, angle: float, shift) -> tuple[np.ndarray, np.ndarray]:
+    """``grid_mesh(n)`` centred on the origin, turned by ``angle`` about x, then moved by ``shift``."""
+    vertices, faces = grid_mesh(n)
+    vertices = vertices - [0.5, 0.5, 0.0]
+    c, s = np.cos(angle), np.sin(angle)
+    return vertices @ np.array([[1, 0, 0], [0, c, s], [0, -s, c]]) + shift, faces
+
+
+@pytest.mark.parametrize("cell", [None, 1 / 8, 0.03])
+def test_grid_crossing_matches_reference_on_touching_and_near_touching_sheets(cell: float | None):
+    inner_v, inner_f = _sheet(8, 0.0, [0.5, 0.5, 0.0])  # z = 0, vertices every 1/8
+    cases = {  # name: (mesh, crossings expected)
+        "tilted through": (_sheet(5, 0.4, [0.5, 0.5, 0.0]), True),
+        "upright, through its triangles": (_sheet(4, np.pi / 2, [0.5, 0.5 + 1 / 16, 1 / 16]), True),
+        "upright, along its edges": (_sheet(4, np.pi / 2, [0.5, 0.5, 1 / 16]), False),  # touching only
+        "upright, an edge row in its plane": (_sheet(4, np.pi / 2, [0.5, 0.5, 0.0]), False),
+        "upright, standing on it": (_sheet(4, np.pi / 2, [0.5, 0.5, 0.5]), False),
+        "itself": ((inner_v, inner_f), False),
+        "1e-15 above": ((inner_v + [0.0, 0.0, 1e-15], inner_f), False),
+        "denormal above": ((inner_v + [0.0, 0.0, 5e-324], inner_f), False),
+        "beside it": (_sheet(4, 0.4, [1.5 + 2**-50, 0.5, 0.0]), False),
+    }
+    grid = TriangleGrid.build(inner_v, inner_f, cell)
+    for name, ((v, f), crosses) in cases.items():
+        got = pair_set(grid.crossing(v, f))
+        assert got == pair_set(intersecting_pairs_reference(v, f, inner_v, inner_f)), name
+        assert bool(got) == crosses, name
+
+
+def test_grid_cells_hold_boxes_whose_sides_fall_on_cell_boundaries_after_rounding():
+    """Regression: sheets of decimal sizes (cells of 0.04, 0.03, ...) whose highest corner divided by
+    the cell rounds just below a whole number while its quantised steps reach it; the grid counted
+    one cell too few and listing its boxes failed."""
+    for n, size in ((10, 0.4), (8, 0.36), (12, 0.3), (9, 0.27)):
+        vertices, faces = grid_mesh(n)
+        vertices = (vertices - [0.5, 0.5, 0.0]) * [size, size, 0.0]
+        corner_x = vertices[faces][:, :, 0]
+        for a in range(n):  # every window of columns, as the repair passes the faces near a layer
+            for b in range(a + 1, n + 1):
+                near = (corner_x.min(axis=1) >= (a / n - 0.5) * size - 1e-12) & (
+                    corner_x.max(axis=1) <= (b / n - 0.5) * size + 1e-12
+                )
+                grid = TriangleGrid.build(vertices, faces[near])
+                spike = np.array([[0.0, 0.0, -1.0], [0.01, 0.0, 1.0], [-0.01, 0.01, 1.0]]) * size
+                expected = intersecting_pairs_reference(spike, ONE_FACE, vertices, faces[near])
+                assert pair_set(grid.crossing(spike, ONE_FACE)) == pair_set(expected)
