@@ -11,6 +11,8 @@ candidate, and the two agree bit for bit.
 
 from __future__ import annotations
 
+import hashlib
+import threading
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, fields
 from functools import cached_property
@@ -242,15 +244,160 @@ class PseudoNormals:
         tri = faces[face]
         vert = n_zero == 2
         if vert.any():
-            out[vert] = self.vertex[tri[vert][~zero[vert]]]
+            out[vert] = self.vertex_at(tri[vert][~zero[vert]])
         edge = n_zero == 1
         if edge.any():
             ends = tri[edge][~zero[edge]].reshape(-1, 2)
             n_v = len(self.vertex)
             keys = ends.min(axis=1) * n_v + ends.max(axis=1)
             pos = np.clip(np.searchsorted(self.edge_keys, keys), 0, len(self.edge_keys) - 1)
-            out[edge] = np.where((self.edge_keys[pos] == keys)[:, None], self.edge[pos], out[edge])
+            out[edge] = np.where((self.edge_keys[pos] == keys)[:, None], self.edge_at(pos), out[edge])
         return out
+
+    def vertex_at(self, index: np.ndarray) -> np.ndarray:
+        """Pseudo-normals ``(N, 3)`` of vertices ``index (N,)``."""
+        return self.vertex[index]
+
+    def edge_at(self, index: np.ndarray) -> np.ndarray:
+        """Pseudo-normals ``(N, 3)`` of edges ``index (N,)`` (rows of ``edge_keys``)."""
+        return self.edge[index]
+
+
+def _padded(owner: np.ndarray, values: np.ndarray, n: int, stable_keys: np.ndarray | None = None) -> np.ndarray:
+    """``(n, R)`` rows: ``values`` grouped by ``owner (M,)`` in input order, padded with -1."""
+    keys = owner if stable_keys is None else stable_keys
+    order = np.argsort(keys, kind="stable")
+    count = np.bincount(owner, minlength=n)
+    start = np.concatenate([[0], np.cumsum(count)[:-1]])
+    out = np.full((n, max(int(count.max(initial=0)), 1)), -1, dtype=np.int64)
+    out[owner[order], np.arange(len(owner)) - np.repeat(start, count)] = values[order]
+    return out
+
+
+@dataclass
+class MeshTopology:
+    """What ``ClosestPoint`` needs from a mesh's faces alone: a garment's (or the body's) faces never
+    change, and the squeeze and the repair build a ``ClosestPoint`` for every new mesh of it
+    (``mesh_topology`` keeps one per face array)."""
+
+    ring: np.ndarray  # (V, R) int64 faces around each vertex in increasing order, -1 padded
+    corners: np.ndarray  # (V, C) int64 corners k F + f of each vertex, in PseudoNormals.build's order
+    edge_keys: np.ndarray  # (E,) int64 sorted keys lo * V + hi
+    edge_sides: np.ndarray  # (E, S) int64 faces of each edge, in PseudoNormals.build's order, -1 padded
+    edge_faces: np.ndarray  # (E,) int64 how many triangles hold each edge
+    boundary_edges: np.ndarray  # (B,) int64 sorted keys of the edges with one triangle
+    boundary_vertices: np.ndarray  # (V,) bool the ends of the boundary edges
+
+    @classmethod
+    def build(cls, faces: np.ndarray, n_v: int) -> MeshTopology:
+        """From ``faces (F, 3) int64`` over ``n_v`` vertices."""
+        n_f = len(faces)
+        owner = faces.reshape(-1)
+        # Stable, so the same order from 16-bit keys, which numpy radix-sorts (~3x faster).
+        small = owner.astype(np.uint16) if n_v <= 1 << 16 else owner
+        ring = _padded(owner, np.arange(len(owner)) // 3, n_v, small)
+        # PseudoNormals.build sums a vertex's corners in the order of faces.T.reshape(-1), an edge's
+        # faces in the order of its edge list (edges 01 of all faces, then 12, then 20).
+        by_corner = faces.T.reshape(-1)
+        small = by_corner.astype(np.uint16) if n_v <= 1 << 16 else by_corner
+        corners = _padded(by_corner, np.arange(len(by_corner)), n_v, small)
+        e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+        edge_keys, inverse = _unique_edges(np.minimum(e[:, 0], e[:, 1]), np.maximum(e[:, 0], e[:, 1]), n_v)
+        edge_sides = _padded(inverse, np.arange(len(inverse)) % max(n_f, 1), len(edge_keys))
+        edge_faces = np.bincount(inverse, minlength=len(edge_keys))
+        boundary = edge_keys[edge_faces == 1]
+        rim = np.zeros(n_v, dtype=bool)
+        rim[boundary // n_v] = True
+        rim[boundary % n_v] = True
+        return cls(ring, corners, edge_keys, edge_sides, edge_faces, boundary, rim)
+
+
+def mesh_topology(faces: np.ndarray, n_v: int) -> MeshTopology:
+    """``MeshTopology.build``, kept per distinct face array (by content) and vertex count, as
+    ``service.fit.vertex_neighbours`` keeps the adjacency (shared: do not modify it)."""
+    faces = np.ascontiguousarray(faces, dtype=np.int64)
+    key = (n_v, faces.shape, hashlib.sha1(faces.tobytes()).digest())
+    with _TOPOLOGY_LOCK:
+        found = _TOPOLOGY.get(key)
+    if found is None:
+        found = MeshTopology.build(faces, n_v)
+        with _TOPOLOGY_LOCK:
+            while len(_TOPOLOGY) >= TOPOLOGY_CACHE:
+                _TOPOLOGY.pop(next(iter(_TOPOLOGY)))  # the oldest
+            _TOPOLOGY[key] = found
+    return found
+
+
+TOPOLOGY_CACHE = 32  # face arrays kept: the body, the catalog's garments and a few more
+_TOPOLOGY: dict = {}
+_TOPOLOGY_LOCK = threading.Lock()
+
+
+def _corner_angles(vertices: np.ndarray, faces: np.ndarray, corner: np.ndarray) -> np.ndarray:
+    """Angles ``(M,)`` at corners ``corner (M,)`` (k F + f: corner k of face f), as PseudoNormals.build
+    computes them (the same operations on the same values, so the same bits)."""
+    f, k = corner % len(faces), corner // len(faces)
+    tri = faces[f]
+    rows = np.arange(len(f))
+    at = np.take(vertices, tri[rows, k], axis=0)
+    a = np.take(vertices, tri[rows, (k + 1) % 3], axis=0) - at
+    b = np.take(vertices, tri[rows, (k + 2) % 3], axis=0) - at
+    length = [np.sqrt(u[:, 0] * u[:, 0] + u[:, 1] * u[:, 1] + u[:, 2] * u[:, 2]) for u in (a, b)]
+    cos = np.einsum("fd,fd->f", a, b) / np.maximum(length[0] * length[1], 1e-300)
+    return np.arccos(np.clip(cos, -1, 1))
+
+
+def _sum_rows(values: np.ndarray, index: np.ndarray) -> np.ndarray:
+    """``(N, 3)`` sums of ``values[index[n, r]]`` over r in order from zero, -1 entries skipped:
+    ``_sum_into``'s sums, which add in input order from zero too."""
+    out = np.zeros((len(index), 3))
+    for r in range(index.shape[1]):
+        col = index[:, r]
+        some = np.flatnonzero(col >= 0)
+        out[some] += values[col[some]]
+    return out
+
+
+class LazyPseudoNormals(PseudoNormals):
+    """``PseudoNormals.build``'s normals, each vertex's and edge's computed the first time ``at`` needs
+    it, bit for bit (the same terms summed in the same order): a query reaches a few thousand of a
+    body's 13,000 vertices, and the angles of all its corners were most of building a mesh's
+    structures. ``vertex`` and ``edge`` hold only those computed so far."""
+
+    @classmethod
+    def of(cls, vertices: np.ndarray, faces: np.ndarray, fn: np.ndarray, topology: MeshTopology):
+        out = cls(np.zeros((len(vertices), 3)), topology.edge_keys, np.zeros((len(topology.edge_keys), 3)),
+                  topology.edge_faces)  # fmt: skip
+        out._mesh, out._topology = (vertices, faces, fn), topology
+        out._vertex_done = np.zeros(len(vertices), dtype=bool)
+        out._edge_done = np.zeros(len(topology.edge_keys), dtype=bool)
+        out._lock = threading.Lock()  # the query's threads may ask for the same normals
+        return out
+
+    def vertex_at(self, index: np.ndarray) -> np.ndarray:
+        with self._lock:
+            todo = np.unique(index[~self._vertex_done[index]])
+            if len(todo):
+                vertices, faces, fn = self._mesh
+                corners = self._topology.corners[todo]  # (T, C)
+                valid = corners >= 0
+                weighted = np.zeros(corners.shape + (3,))
+                used = corners[valid]
+                weighted[valid] = _corner_angles(vertices, faces, used)[:, None] * fn[used % len(faces)]
+                out = np.zeros((len(todo), 3))
+                for r in range(corners.shape[1]):
+                    out += weighted[:, r]  # + 0.0 at the padding: no change
+                self.vertex[todo] = out
+                self._vertex_done[todo] = True
+            return self.vertex[index]
+
+    def edge_at(self, index: np.ndarray) -> np.ndarray:
+        with self._lock:
+            todo = np.unique(index[~self._edge_done[index]])
+            if len(todo):
+                self.edge[todo] = _sum_rows(self._mesh[2], self._topology.edge_sides[todo])
+                self._edge_done[todo] = True
+            return self.edge[index]
 
 
 def _finish(points, vertices, faces, fn, face, bary, pseudo: PseudoNormals, point=None) -> Closest:
@@ -295,17 +442,13 @@ class ClosestPoint:
         return cls(np.asarray(vertices, dtype=np.float64), np.asarray(faces, dtype=np.int64))
 
     @cached_property
+    def topology(self) -> MeshTopology:
+        return mesh_topology(self.faces, len(self.vertices))
+
+    @cached_property
     def ring(self) -> np.ndarray:
-        """(V, R) faces around each vertex in increasing order, padded with -1."""
-        owner = self.faces.reshape(-1)
-        # Stable, so the same order from 16-bit keys, which numpy radix-sorts (~3x faster).
-        order = np.argsort(owner.astype(np.uint16) if len(self.vertices) <= 1 << 16 else owner, kind="stable")
-        count = np.bincount(owner, minlength=len(self.vertices))
-        start = np.concatenate([[0], np.cumsum(count)[:-1]])
-        ring = np.full((len(self.vertices), max(int(count.max()), 1)), -1, dtype=np.int64)
-        slot = np.arange(len(owner)) - np.repeat(start, count)
-        ring[owner[order], slot] = order // 3
-        return ring
+        """(V, R) faces around each vertex in increasing order, padded with -1 (shared: do not modify)."""
+        return self.topology.ring
 
     @cached_property
     def tree(self) -> cKDTree:
@@ -318,25 +461,21 @@ class ClosestPoint:
 
     @cached_property
     def pseudo(self) -> PseudoNormals:
-        return PseudoNormals.build(self.vertices, self.faces, self.fn)
+        return LazyPseudoNormals.of(self.vertices, self.faces, self.fn, self.topology)
 
     @cached_property
     def bounds(self) -> DistanceBounds:
         return DistanceBounds.build(self.vertices, self.faces)
 
-    @cached_property
+    @property
     def boundary_edges(self) -> np.ndarray:
         """Sorted keys ``min * V + max`` of the edges with one triangle (an open mesh's rims)."""
-        return self.pseudo.edge_keys[self.pseudo.edge_faces == 1]
+        return self.topology.boundary_edges
 
-    @cached_property
+    @property
     def boundary_vertices(self) -> np.ndarray:
         """``(V,) bool``: the ends of the boundary edges."""
-        n_v = len(self.vertices)
-        out = np.zeros(n_v, dtype=bool)
-        out[self.boundary_edges // n_v] = True
-        out[self.boundary_edges % n_v] = True
-        return out
+        return self.topology.boundary_vertices
 
     def on_boundary(self, c: Closest) -> np.ndarray:
         """``(N,) bool``: closest points ``c`` lying on the mesh's boundary (a rim edge or its ends).
@@ -403,7 +542,7 @@ class ClosestPoint:
         if len(points) <= QUERY_BLOCK or QUERY_THREADS <= 1:
             return self._query_block(points, k)
         # Build the lazy structures here: cached_property is not safe to fill from two threads.
-        _ = self.ring, self.tree, self.fn, self.pseudo, self.bounds
+        _ = self.topology, self.ring, self.tree, self.fn, self.pseudo, self.bounds
         rounds = -(-len(points) // (QUERY_BLOCK * QUERY_THREADS))
         blocks = np.array_split(points, rounds * QUERY_THREADS)
         parts = list(_pool().map(lambda b: self._query_block(b, k), blocks))

@@ -25,6 +25,22 @@ def check_mesh(vertices: np.ndarray, faces: np.ndarray) -> None:
 
 def face_normals(vertices: np.ndarray, faces: np.ndarray, normalize: bool = True) -> np.ndarray:
     """Normals ``(F, 3)``; unnormalised ones have length twice the triangle area."""
+    v = np.take(vertices, faces, axis=0)
+    a, b = (v[:, 1] - v[:, 0]).T, (v[:, 2] - v[:, 0]).T
+    # np.cross's products and differences, component by component on contiguous rows (~2x faster);
+    # np.linalg.norm's sum of squares in its order (face_normals_reference holds them together).
+    n = np.empty((len(v), 3))
+    n[:, 0] = a[1] * b[2] - a[2] * b[1]
+    n[:, 1] = a[2] * b[0] - a[0] * b[2]
+    n[:, 2] = a[0] * b[1] - a[1] * b[0]
+    if normalize:
+        length = np.sqrt(n[:, 0] * n[:, 0] + n[:, 1] * n[:, 1] + n[:, 2] * n[:, 2])
+        n /= np.maximum(length, 1e-30)[:, None]
+    return n
+
+
+def face_normals_reference(vertices: np.ndarray, faces: np.ndarray, normalize: bool = True) -> np.ndarray:
+    """``face_normals`` with np.cross and np.linalg.norm."""
     v = vertices[faces]
     n = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
     if normalize:

@@ -111,7 +111,22 @@ def _clear_of(x: np.ndarray, faces: np.ndarray, kept: KeptQueries) -> np.ndarray
     ``kept``: a vertex v farther from it than the triangle's longest edge L puts every point of the
     triangle (within L of v) off the mesh. The distance of v comes from its last closest-point answer,
     less how far v moved since; a vertex never asked proves nothing. Only the rest get the exact
-    crossing tests, the same pairs as testing them all."""
+    crossing tests, the same pairs as testing them all. ``_clear_of_reference`` bit for bit, with the
+    bounds of the triangles' vertices only (a round tests a few hundred of a garment's triangles)."""
+    used = np.zeros(len(x), dtype=bool)
+    used[faces.ravel()] = True
+    at = np.flatnonzero(used)
+    bound = np.full(len(x), -np.inf)
+    moved = np.abs(kept.signed[at]) - np.linalg.norm(x[at] - kept.points[at], axis=1)  # NaN: never asked
+    bound[at] = np.where(np.isnan(moved), -np.inf, moved)
+    tri = x[faces]
+    # The edges b - a, c - b, a - c as the reference's roll gives them (a - c, b - a, c - b): the same norms.
+    longest = np.max(np.linalg.norm(tri - tri[:, [2, 0, 1]], axis=2), axis=1)
+    return bound[faces].max(axis=1) > longest
+
+
+def _clear_of_reference(x: np.ndarray, faces: np.ndarray, kept: KeptQueries) -> np.ndarray:
+    """``_clear_of`` from the bounds of all vertices."""
     bound = np.abs(kept.signed) - np.linalg.norm(x - kept.points, axis=1)  # NaN where never asked
     bound = np.where(np.isnan(bound), -np.inf, bound)
     tri = x[faces]
@@ -119,14 +134,17 @@ def _clear_of(x: np.ndarray, faces: np.ndarray, kept: KeptQueries) -> np.ndarray
     return bound[faces].max(axis=1) > longest
 
 
-def _faces_around(mesh: ClosestPoint, triangles: np.ndarray, pad: float) -> np.ndarray:
-    """Indices of ``mesh``'s faces with a vertex inside the bounding box of ``triangles (T, 3, 3)``
-    grown by ``pad``."""
-    if not len(triangles):
+def _faces_around(mesh: ClosestPoint, points: np.ndarray, pad: float) -> np.ndarray:
+    """Indices of ``mesh``'s faces with a vertex inside the bounding box of ``points (P, 3)`` (the
+    corners of the triangles tested against it) grown by ``pad``."""
+    if not len(points):
         return np.zeros(0, dtype=np.int64)
-    lo, hi = triangles.min(axis=(0, 1)) - pad, triangles.max(axis=(0, 1)) + pad
-    inside = np.all((mesh.vertices >= lo) & (mesh.vertices <= hi), axis=1)
-    return np.flatnonzero(inside[mesh.faces].any(axis=1))
+    lo, hi = points.min(axis=0) - pad, points.max(axis=0) + pad
+    v = mesh.vertices
+    inside = (v[:, 0] >= lo[0]) & (v[:, 0] <= hi[0]) & (v[:, 1] >= lo[1]) & (v[:, 1] <= hi[1])
+    inside &= (v[:, 2] >= lo[2]) & (v[:, 2] <= hi[2])
+    f = mesh.faces
+    return np.flatnonzero(inside[f[:, 0]] | inside[f[:, 1]] | inside[f[:, 2]])
 
 
 def diffuse(u: np.ndarray, held: np.ndarray, region: np.ndarray, adjacency, iterations: int) -> np.ndarray:
@@ -156,12 +174,12 @@ def repair_layer(
     # Only triangles with a vertex near an inner layer can cross it, and only the inner triangles
     # around those (the rest of a body never changes between rounds).
     tested = [np.flatnonzero(layer.near[faces].any(axis=1)) for layer in inner]
-    grids = [
-        TriangleGrid.build(
-            layer.mesh.vertices, layer.mesh.faces[_faces_around(layer.mesh, x[faces[t]], settings.band)]
-        )
-        for layer, t in zip(inner, tested, strict=True)
-    ]
+    grids = []
+    for layer, t in zip(inner, tested, strict=True):
+        corners = np.zeros(len(x), dtype=bool)  # the tested triangles' corners: the same bounding box
+        corners[faces[t].ravel()] = True
+        around = _faces_around(layer.mesh, x[corners], settings.band)
+        grids.append(TriangleGrid.build(layer.mesh.vertices, layer.mesh.faces[around]))
     queries = [KeptQueries(layer.mesh, len(x)) for layer in inner]
     # Crossing pairs (tested triangle, inner triangle) of each layer, and the vertices they were
     # found at: a triangle none of whose vertices moved keeps its pairs (the inner layers are fixed).

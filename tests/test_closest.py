@@ -10,13 +10,16 @@ import trimesh
 from service.closest import (
     ClosestPoint,
     DistanceBounds,
+    LazyPseudoNormals,
+    MeshTopology,
     PseudoNormals,
+    mesh_topology,
     _sum_into,
     _unique_edges,
     closest_on_triangles,
     closest_point_reference,
 )
-from service.mesh import face_normals
+from service.mesh import face_normals, face_normals_reference
 
 
 def test_unique_edges_is_np_unique():
@@ -187,3 +190,58 @@ def test_distance_bounds_hold_ericsons_distance():
     lower, upper = bounds.squared_distance(points[shaped], np.arange(len(shaped)), np.arange(len(shaped)))
     scale = d2[shaped] + np.einsum("nkd,nkd->n", edge[shaped], edge[shaped])
     assert len(shaped) > 1000 and np.all(upper - lower <= 1e-5 * scale)
+
+
+def _open_box():
+    box = trimesh.creation.box(extents=(0.3, 0.2, 0.1))
+    keep = np.flatnonzero(box.face_normals[:, 2] < 0.5)  # no lid: a rim
+    return np.asarray(box.vertices, dtype=np.float64), np.asarray(box.faces[keep], dtype=np.int64)
+
+
+def test_lazy_pseudo_normals_are_the_built_ones_bit_for_bit():
+    for v, f in (_bumpy_sphere(3)[:2], _open_box()):
+        fn = face_normals(v, f)
+        full = PseudoNormals.build(v, f, fn)
+        lazy = LazyPseudoNormals.of(v, f, fn, MeshTopology.build(f, len(v)))
+        rng = np.random.default_rng(3)
+        # Piecemeal, repeats included, as the queries ask: then every vertex and edge.
+        for _ in range(3):
+            some = rng.integers(0, len(v), 7)
+            np.testing.assert_array_equal(lazy.vertex_at(some), full.vertex[some])
+            some = rng.integers(0, len(full.edge_keys), 7)
+            np.testing.assert_array_equal(lazy.edge_at(some), full.edge[some])
+        np.testing.assert_array_equal(lazy.vertex_at(np.arange(len(v))), full.vertex)
+        np.testing.assert_array_equal(lazy.edge_at(np.arange(len(full.edge_keys))), full.edge)
+        np.testing.assert_array_equal(lazy.edge_keys, full.edge_keys)
+        np.testing.assert_array_equal(lazy.edge_faces, full.edge_faces)
+
+
+def test_query_with_lazy_pseudo_normals_is_the_one_with_built_ones():
+    for v, f in (_bumpy_sphere(3)[:2], _open_box()):
+        mesh, built = ClosestPoint.build(v, f), ClosestPoint.build(v, f)
+        built.pseudo = PseudoNormals.build(built.vertices, built.faces, built.fn)
+        points = np.random.default_rng(4).normal(size=(400, 3)) * 0.1
+        got, ref = mesh.query(points), built.query(points)
+        for name in ("face", "bary", "point", "distance", "signed", "normal"):
+            np.testing.assert_array_equal(getattr(got, name), getattr(ref, name))
+        np.testing.assert_array_equal(mesh.on_boundary(got), built.on_boundary(ref))
+
+
+def test_kept_topology_is_a_fresh_one_and_kept_by_content():
+    v, f, _ = _bumpy_sphere(3)
+    kept = mesh_topology(f, len(v))
+    assert mesh_topology(f.copy().astype(np.int32), len(v)) is kept
+    fresh = MeshTopology.build(f.astype(np.int64), len(v))
+    for name in ("ring", "corners", "edge_keys", "edge_sides", "edge_faces", "boundary_edges", "boundary_vertices"):
+        np.testing.assert_array_equal(getattr(kept, name), getattr(fresh, name))
+    other = f[:, [0, 2, 1]]
+    assert mesh_topology(other, len(v)) is not kept
+
+
+def test_face_normals_are_the_reference_bit_for_bit():
+    rng = np.random.default_rng(5)
+    v = rng.normal(size=(500, 3)) * 10.0 ** rng.integers(-4, 3, size=(500, 1))
+    f = rng.integers(0, 500, size=(1000, 3))
+    f[:5, 1] = f[:5, 0]  # degenerate: zero normals
+    for normalize in (True, False):
+        np.testing.assert_array_equal(face_normals(v, f, normalize), face_normals_reference(v, f, normalize))

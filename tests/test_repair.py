@@ -7,7 +7,7 @@ import trimesh
 
 from service.closest import ClosestPoint, KeptQueries
 from service.intersections import intersecting_pairs
-from service.repair import Inner, RepairSettings, repair_layer
+from service.repair import Inner, RepairSettings, _clear_of, _clear_of_reference, _faces_around, repair_layer
 from tests.meshes import grid_mesh
 
 
@@ -163,3 +163,27 @@ def _asked(layer: Inner, x: np.ndarray) -> KeptQueries:
     kept = KeptQueries(layer.mesh, len(x))
     kept.at(x, np.arange(len(x)))
     return kept
+
+
+def test_clear_of_is_the_reference_bit_for_bit():
+    inner_v, inner_f = _sheet(12, 0.4, lambda v: 0.0 * v[:, 0])
+    outer_v, outer_f = _sheet(16, 0.36, lambda v: 0.004 + 0.3 * (v[:, 0] + 0.18))
+    kept = KeptQueries(ClosestPoint.build(inner_v, inner_f), len(outer_v))
+    rng = np.random.default_rng(6)
+    kept.at(outer_v, np.flatnonzero(rng.random(len(outer_v)) < 0.6))  # some never asked
+    x = outer_v + rng.normal(size=outer_v.shape) * 0.002
+    some = outer_f[rng.random(len(outer_f)) < 0.5]
+    got = _clear_of(x, some, kept)
+    np.testing.assert_array_equal(got, _clear_of_reference(x, some, kept))
+    assert got.any() and not got.all()
+
+
+def test_faces_around_are_those_with_a_vertex_in_the_grown_box():
+    inner_v, inner_f = _sheet(12, 0.4, lambda v: 0.0 * v[:, 0])
+    mesh = ClosestPoint.build(inner_v, inner_f)
+    corners = np.array([[-0.05, -0.02, 0.01], [0.03, 0.04, 0.0]])
+    lo, hi = corners.min(axis=0) - 0.01, corners.max(axis=0) + 0.01
+    inside = np.all((inner_v >= lo) & (inner_v <= hi), axis=1)
+    got = _faces_around(mesh, corners, 0.01)
+    np.testing.assert_array_equal(got, np.flatnonzero(inside[inner_f].any(axis=1)))
+    assert 0 < len(got) < len(inner_f)
