@@ -7,8 +7,8 @@ Run (a few minutes)::
 For body + 1, 2 and 3 garments (tops stacked, a bottom under them), ``--bodies`` random shapes from the
 supported box each: p50 / p95 of the total and the p50 of every stage (``report["seconds"]``; no quality
 measures, as the service calls it; the garments' fits run side by side, so "fit" is their wall time and
-fields / untangle / optimise are summed over the garments), then the field evaluation at 30,000 points (values only, and with
-x-gradients) for the speed target of the issue. No cache: every shape is new.
+fields / untangle / optimise are summed over the garments), then the field evaluation at 30,000 points
+(values only, and with x-gradients) for the speed target of the issue. No cache: every shape is new.
 """
 
 from __future__ import annotations

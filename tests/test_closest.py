@@ -13,11 +13,11 @@ from service.closest import (
     LazyPseudoNormals,
     MeshTopology,
     PseudoNormals,
-    mesh_topology,
     _sum_into,
     _unique_edges,
     closest_on_triangles,
     closest_point_reference,
+    mesh_topology,
 )
 from service.mesh import face_normals, face_normals_reference
 
@@ -232,7 +232,9 @@ def test_kept_topology_is_a_fresh_one_and_kept_by_content():
     kept = mesh_topology(f, len(v))
     assert mesh_topology(f.copy().astype(np.int32), len(v)) is kept
     fresh = MeshTopology.build(f.astype(np.int64), len(v))
-    for name in ("ring", "corners", "edge_keys", "edge_sides", "edge_faces", "boundary_edges", "boundary_vertices"):
+    names = ("ring", "corners", "edge_keys", "edge_sides", "edge_faces")
+    names += ("boundary_edges", "boundary_vertices")
+    for name in names:
         np.testing.assert_array_equal(getattr(kept, name), getattr(fresh, name))
     other = f[:, [0, 2, 1]]
     assert mesh_topology(other, len(v)) is not kept
