@@ -176,6 +176,45 @@ def test_export_matches_torch_and_detects_a_wrong_graph(tmp_path, monkeypatch):
         export_fields.export_field(net, "probe", tmp_path, x, beta)
 
 
+def test_gradient_batches_agree_with_one_call(tmp_path, monkeypatch):
+    from export import fields as export_fields
+    from service import fields as service_fields
+
+    net = _net(8).float()
+    rng = np.random.default_rng(8)
+    x = (rng.normal(size=(300, 3)) * 0.3 + [0, 0, 1]).astype(np.float32)
+    beta = np.array([[0.2, 0.4, 0.6]], dtype=np.float32)
+    export_fields.export_field(net, "probe", tmp_path, x, beta)
+    field = service_fields.NeuralField("probe", tmp_path, threads=1)
+    whole = field(x, beta[0], gradient=True)
+    monkeypatch.setattr(service_fields, "GRADIENT_BATCH", 64)  # 5 calls, the last one short
+    for a, b in zip(field(x, beta[0], gradient=True), whole, strict=True):
+        np.testing.assert_array_equal(a, b)
+
+
+def test_gradient_graph_reexports_from_the_values_graph(tmp_path):
+    """``load_exported`` reads back the exact parameters; the re-exported gradient graph matches."""
+    from export import fields as export_fields
+    from service.fields import NeuralField
+
+    net = _net(8).float()
+    rng = np.random.default_rng(7)
+    x = (rng.normal(size=(300, 3)) * 0.3 + [0, 0, 1]).astype(np.float32)
+    beta = np.array([[0.2, 0.4, 0.6]], dtype=np.float32)
+    check = export_fields.export_field(net, "probe", tmp_path, x, beta)
+    export_fields.write_config(tmp_path, {"probe": export_fields.field_entry(net, check, {}, 0.0)})
+    loaded = export_fields.load_exported("probe", tmp_path)
+    for (name, p), (name_q, q) in zip(net.state_dict().items(), loaded.state_dict().items(), strict=True):
+        assert name == name_q
+        torch.testing.assert_close(p, q, atol=0, rtol=0)
+    before = NeuralField("probe", tmp_path, threads=1)(x, beta[0], gradient=True)
+    regrad = export_fields.reexport_gradient("probe", tmp_path, x, beta)
+    assert set(regrad) == {"grad:f", "grad:h", "grad:grad_f", "grad:grad_h"}
+    after = NeuralField("probe", tmp_path, threads=1)(x, beta[0], gradient=True)
+    for a, b in zip(after, before, strict=True):
+        np.testing.assert_allclose(a, b, atol=1e-6)
+
+
 class _Broken(torch.nn.Module):
     def __init__(self, net):
         super().__init__()

@@ -5,10 +5,11 @@ features [x, sin(2 pi B x), cos(2 pi B x)] (Tancik et al. 2020; B ~ N(0, sigma^2
 normalised over the supported box, and an MLP with SiLU activations (smooth, so that its input
 gradients are smooth too) outputs (f, h) / OUTPUT_SCALE.
 
-``with_gradient`` returns f, h and their x-gradients computed forward-mode as three extra row blocks
-that share every layer's GEMM with the values (DESIGN.md section 5); training uses it for the gradient
-losses and the ONNX export runs the same code, so the exported gradient graph is the trained one.
-The beta part of the first layer is computed once per call (beta is one shape per request).
+``with_gradient`` returns f, h and their x-gradients in reverse mode: after the values pass, the
+cotangents of f and h go back through the layers as one (2, P, W) tensor, one GEMM per layer (forward
+mode, the earlier form, needs three tangents). Training uses it for the
+gradient losses and the ONNX export runs the same code, so the exported gradient graph is the trained
+one. The beta part of the first layer is computed once per call (beta is one shape per request).
 """
 
 from __future__ import annotations
@@ -98,31 +99,34 @@ class FieldNet(torch.nn.Module):
         return out[:, 0], out[:, 1]
 
     def with_gradient(self, x, beta):
-        """(f (P,), h (P,), grad f (P, 3), grad h (P, 3)), gradients forward-mode in stacked rows."""
-        n = x.shape[0]
+        """(f (P,), h (P,), grad f (P, 3), grad h (P, 3)), gradients in reverse mode.
+
+        Two cotangents instead of three tangents: 2/3 of forward mode's GEMM work on the hidden
+        layers, and no per-layer concatenation (the stacked forward-mode graph this replaced spent
+        more time in Concat, Slice and Tile than in its GEMMs).
+        """
+        m = self.config.fourier
         xn, proj = self._features(x)
-        s, c = torch.sin(proj), torch.cos(proj)
-        eye = torch.eye(3, dtype=x.dtype, device=x.device) * self.inv_extent  # d xn / dx
-        # d features / d x_d for d = 0, 1, 2 stacked under the values: (4P, n_in)
-        blocks = [torch.cat([xn, s, c], 1)]
-        for d in range(3):
-            w = self.freqs[:, d] * self.inv_extent  # (m,)
-            blocks.append(torch.cat([eye[d].expand(n, 3), c * w, -s * w], 1))
-        t = torch.cat(blocks, 0) @ self.first.weight.T  # (4P, W): one GEMM
-        z = t[:n] + self._first_bias(beta)
+        s, c = torch.sin(proj), torch.cos(proj)  # (P, m)
+        features = torch.cat([xn, s, c], 1)  # (P, 3 + 2m)
+        a, slope = self._silu_and_slope(features @ self.first.weight.T + self._first_bias(beta))
+        slopes = [slope]  # silu'(z) of every layer, (P, W)
         for layer in self.hidden:
-            a, da = self._silu_with_grad(z, t[n:])
-            t = torch.cat([a, da], 0) @ layer.weight.T
-            z = t[:n] + layer.bias
-        a, da = self._silu_with_grad(z, t[n:])
-        t = torch.cat([a, da], 0) @ self.out.weight.T * OUTPUT_SCALE  # (4P, 2)
-        out = t[:n] + self.out.bias * OUTPUT_SCALE
-        grad = t[n:].reshape(3, n, 2).permute(1, 0, 2)  # (P, 3, 2)
-        return out[:, 0], out[:, 1], grad[:, :, 0], grad[:, :, 1]
+            a, slope = self._silu_and_slope(layer(a))
+            slopes.append(slope)
+        out = self.out(a) * OUTPUT_SCALE  # (P, 2)
+        # Cotangents d(f, h) / dz of each layer, last to first: (2, P, W).
+        g = (self.out.weight * OUTPUT_SCALE)[:, None, :] * slopes[-1]
+        for layer, slope in zip(reversed(self.hidden), reversed(slopes[:-1]), strict=True):
+            g = (g @ layer.weight) * slope
+        # Through the features: d xn / dx = inv_extent, d sin / dx = cos freqs inv_extent, d cos = -sin ...
+        g_xn, g_sin, g_cos = (g @ self.first.weight).split([3, m, m], -1)  # (2, P, 3), (2, P, m) twice
+        grad = (g_xn + (g_sin * c - g_cos * s) @ self.freqs) * self.inv_extent  # (2, P, 3)
+        return out[:, 0], out[:, 1], grad[0], grad[1]
 
     @staticmethod
-    def _silu_with_grad(z, dz):
-        """(silu(z) (P, W), silu'(z) dz (3P, W)) for tangents ``dz`` stacked in 3 blocks."""
+    def _silu_and_slope(z):
+        """(silu(z), silu'(z)) for z (P, W); silu' = sig (1 + z (1 - sig)) = sig + silu (1 - sig)."""
         sig = torch.sigmoid(z)
-        slope = sig * (1 + z * (1 - sig))
-        return z * sig, dz * slope.repeat(3, 1)
+        a = z * sig
+        return a, sig + a * (1 - sig)
