@@ -1,15 +1,25 @@
 """Export the neural untangling operator to ONNX (called by ``python -m training.untangler``).
 
 The contract (input/output names, batch axis, opset, tolerances) lives in ``service.untangle_onnx``.
-Two graphs: ``values.onnx`` (f only, what the 30k-point speed target counts) and ``jacobian.onnx``
-(f and its Jacobian w.r.t. f* and h*, computed explicitly inside the graph). The export is a contract
-plus a check: both files are run with onnxruntime on a check batch (every sampler, points inside the h*
-blend band, padded slots) and the export raises unless they match torch within ``EXPORT_TOLERANCE``.
+Three graphs: ``values.onnx`` (f only, what the 30k-point speed target counts), ``jacobian.onnx``
+(f and its Jacobian w.r.t. f* and h*, computed explicitly inside the graph) and ``jacobian_row.onnx``
+(f and one weighted row of it, what the fit uses). The export is a contract plus a check: every file is
+run with onnxruntime on a check batch (every sampler, points inside the h* blend band, padded slots)
+and the export raises unless it matches torch within ``EXPORT_TOLERANCE``, the row graph for each of
+the 5 one-hot rows, also against the rows of ``jacobian.onnx``.
+
+``python -m export.untangler`` re-exports the row graph without retraining: the weights are read back
+from the committed ``values.onnx`` (``load_exported``), the new graph is checked against torch and
+against the rows of the committed ``jacobian.onnx``, and ``untangler.json`` records the check. Then
+refresh the manifest (``python -m export.manifest``).
 """
 
 from __future__ import annotations
 
+import argparse
 import json
+import os
+import tempfile
 import warnings
 from dataclasses import asdict
 from pathlib import Path
@@ -18,6 +28,7 @@ import numpy as np
 import onnx
 import onnxruntime as ort
 import torch
+from onnx import numpy_helper
 
 from service.untangle_onnx import (
     BATCH_AXIS,
@@ -30,9 +41,13 @@ from service.untangle_onnx import (
     OUTPUT_NAMES,
     PAD_F,
     PAD_H,
+    ROW_FILE,
+    ROW_INPUT,
+    ROW_OUTPUT_NAMES,
     VALUES_FILE,
+    default_directory,
 )
-from training.untangler import UntanglerNet
+from training.untangler import UntanglerConfig, UntanglerNet
 from training.untangler_data import sample_batch
 
 CHECK_POINTS = 4096
@@ -53,6 +68,14 @@ class _WithJacobian(_Values):
         return self.net.with_jacobian(f_star, h_star)
 
 
+class _WithJacobianRow(_Values):
+    def forward(self, f_star, h_star, row):
+        return self.net.with_jacobian_row(f_star, h_star, row)
+
+
+ONE_HOT_ROWS = np.eye(N_SLOTS, dtype=np.float32)[:, None]  # (5, 1, 5): the rows the check asks for
+
+
 def check_inputs(net: UntanglerNet) -> tuple[np.ndarray, np.ndarray]:
     """``(f*, h*)`` ``(CHECK_POINTS, 5) float32`` from the training mixture, a quarter in the blend band."""
     rng = np.random.default_rng(CHECK_SEED)
@@ -70,8 +93,71 @@ def max_excess(ours: np.ndarray, theirs: np.ndarray, tolerance: tuple[float, flo
     return float(np.max(np.abs(ours - theirs) - (atol + rtol * np.abs(theirs))))
 
 
+def _export_graph(module: torch.nn.Module, path: Path, inputs: tuple, names: tuple, outputs: tuple) -> None:
+    with warnings.catch_warnings():  # the TorchScript exporter is deliberate (no onnxscript)
+        warnings.simplefilter("ignore", DeprecationWarning)
+        warnings.simplefilter("ignore", torch.jit.TracerWarning)  # constants from numpy, meant as such
+        torch.onnx.export(
+            module, inputs, str(path), dynamo=False, opset_version=OPSET,
+            input_names=list(names), output_names=list(outputs),
+            dynamic_axes={a: {0: BATCH_AXIS} for a in (*INPUT_NAMES, *outputs)},
+        )  # fmt: skip
+    onnx.checker.check_model(onnx.load(str(path)), full_check=True)
+
+
+def _session(path: Path) -> ort.InferenceSession:
+    options = ort.SessionOptions()
+    options.intra_op_num_threads = 1
+    return ort.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
+
+
+def _compare(ours: np.ndarray, reference: np.ndarray, key: str, output: str, against: str) -> float:
+    """Max abs difference; RuntimeError beyond ``EXPORT_TOLERANCE[output]``."""
+    diff = float(np.abs(ours - reference).max())
+    if max_excess(ours, reference, EXPORT_TOLERANCE[output]) > 0:
+        raise RuntimeError(
+            f"{key} differs from {against} by {diff:.3g} beyond the tolerance (atol, rtol) = "
+            f"{EXPORT_TOLERANCE[output]}"
+        )
+    return diff
+
+
+def run_rows(path: Path, f: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The row graph at ``path`` for each one-hot row: (f ``(5, B, 5)``, rows ``(5, B, 10)``)."""
+    session = _session(path)
+    runs = [
+        session.run(list(ROW_OUTPUT_NAMES), {"f_star": f, "h_star": h, ROW_INPUT: r}) for r in ONE_HOT_ROWS
+    ]
+    return np.stack([r[0] for r in runs]), np.stack([r[1] for r in runs])
+
+
+def torch_rows(net: UntanglerNet, f: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``with_jacobian_row`` for each one-hot row, as ``run_rows``."""
+    ft, ht = torch.from_numpy(f), torch.from_numpy(h)
+    with torch.no_grad():
+        runs = [net.with_jacobian_row(ft, ht, torch.from_numpy(r)) for r in ONE_HOT_ROWS]
+    return np.stack([r[0].numpy() for r in runs]), np.stack([r[1].numpy() for r in runs])
+
+
+def check_row_graph(
+    path: Path, net: UntanglerNet, jacobian: np.ndarray, f: np.ndarray, h: np.ndarray
+) -> dict:
+    """Check the row graph at ``path`` on the check batch ``f``, ``h`` ``(B, 5)`` against torch and
+    against the rows of ``jacobian (B, 5, 10)`` (a ``jacobian.onnx`` output); raises RuntimeError
+    beyond tolerance. Returns the max abs differences."""
+    values, rows = run_rows(path, f, h)
+    reference_f, reference_rows = torch_rows(net, f, h)
+    against_full = np.moveaxis(jacobian, 1, 0)  # (5, B, 10)
+    key = f"{path.name}:{ROW_OUTPUT_NAMES[1]}"
+    return {
+        f"{path.name}:f": _compare(values, reference_f, f"{path.name}:f", "f", "torch"),
+        key: _compare(rows, reference_rows, key, ROW_OUTPUT_NAMES[1], "torch"),
+        f"{key} vs {JACOBIAN_FILE}": _compare(rows, against_full, key, ROW_OUTPUT_NAMES[1], JACOBIAN_FILE),
+    }
+
+
 def export(net: UntanglerNet, directory: Path, metrics: dict | None = None) -> dict:
-    """Write the two graphs and the config json to ``directory``; returns the export check
+    """Write the three graphs and the config json to ``directory``; returns the export check
     (max abs difference onnxruntime vs torch per output). Raises RuntimeError beyond tolerance."""
     directory.mkdir(parents=True, exist_ok=True)
     net = net.float().eval()
@@ -79,33 +165,23 @@ def export(net: UntanglerNet, directory: Path, metrics: dict | None = None) -> d
     ft, ht = torch.from_numpy(f), torch.from_numpy(h)
     with torch.no_grad():
         reference = dict(zip(OUTPUT_NAMES, (t.numpy() for t in net.with_jacobian(ft, ht)), strict=True))
-    options = ort.SessionOptions()
-    options.intra_op_num_threads = 1
     check = {}
     for module, name, outputs in (
         (_Values(net), VALUES_FILE, OUTPUT_NAMES[:1]),
         (_WithJacobian(net), JACOBIAN_FILE, OUTPUT_NAMES),
     ):
         path = directory / name
-        with warnings.catch_warnings():  # the TorchScript exporter is deliberate (no onnxscript)
-            warnings.simplefilter("ignore", DeprecationWarning)
-            torch.onnx.export(
-                module, (ft[:2], ht[:2]), str(path), dynamo=False, opset_version=OPSET,
-                input_names=list(INPUT_NAMES), output_names=list(outputs),
-                dynamic_axes={a: {0: BATCH_AXIS} for a in (*INPUT_NAMES, *outputs)},
-            )  # fmt: skip
-        onnx.checker.check_model(onnx.load(str(path)), full_check=True)
-        session = ort.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
-        results = session.run(list(outputs), dict(zip(INPUT_NAMES, (f, h), strict=True)))
+        _export_graph(module, path, (ft[:2], ht[:2]), INPUT_NAMES, outputs)
+        results = _session(path).run(list(outputs), dict(zip(INPUT_NAMES, (f, h), strict=True)))
         for output, value in zip(outputs, results, strict=True):
-            excess = max_excess(value, reference[output], EXPORT_TOLERANCE[output])
-            diff = float(np.abs(value - reference[output]).max())
-            check[f"{name}:{output}"] = diff
-            if excess > 0:
-                raise RuntimeError(
-                    f"{path} output {output!r} differs from torch by {diff:.3g} beyond the tolerance "
-                    f"(atol, rtol) = {EXPORT_TOLERANCE[output]}"
-                )
+            key = f"{name}:{output}"
+            check[key] = _compare(value, reference[output], f"{path} output {output!r}", output, "torch")
+    jacobian = _session(directory / JACOBIAN_FILE).run([OUTPUT_NAMES[1]], {"f_star": f, "h_star": h})[0]
+    row_inputs = (ft[:2], ht[:2], torch.from_numpy(ONE_HOT_ROWS[1]))
+    _export_graph(
+        _WithJacobianRow(net), directory / ROW_FILE, row_inputs, (*INPUT_NAMES, ROW_INPUT), ROW_OUTPUT_NAMES
+    )
+    check |= check_row_graph(directory / ROW_FILE, net, jacobian, f, h)
     meta = {
         "config": asdict(net.config),
         "delta": net.config.delta,
@@ -117,3 +193,79 @@ def export(net: UntanglerNet, directory: Path, metrics: dict | None = None) -> d
     }
     (directory / CONFIG_FILE).write_text(json.dumps(meta, indent=2) + "\n")
     return check
+
+
+def load_exported(directory: Path) -> UntanglerNet:
+    """The network of the committed ``values.onnx`` (config from ``untangler.json``).
+
+    Named initializers map to parameters by name (every parameter, nothing else); the one the
+    TorchScript exporter left unnamed is the pair-difference matrix ``diff.T (5, 10)``, a buffer
+    built from the config, which must agree. The weights of ``jacobian.onnx`` must be the same."""
+    config = json.loads((directory / CONFIG_FILE).read_text())["config"]
+    net = UntanglerNet(UntanglerConfig(**config | {"mixture": tuple(config["mixture"])}))
+
+    def initializers(name: str) -> dict[str, np.ndarray]:
+        graph = onnx.load(str(directory / name)).graph
+        return {i.name: numpy_helper.to_array(i) for i in graph.initializer}
+
+    arrays = initializers(VALUES_FILE)
+    loaded = {k[len("net.") :]: v for k, v in arrays.items() if k.startswith("net.")}
+    parameters = dict(net.named_parameters())
+    if set(loaded) != set(parameters):
+        raise ValueError(f"{VALUES_FILE}: parameters {sorted(set(parameters) ^ set(loaded))} do not match")
+    for name, value in loaded.items():
+        if value.shape != tuple(parameters[name].shape):
+            raise ValueError(
+                f"{VALUES_FILE}: {name} is {value.shape}, the config gives {parameters[name].shape}"
+            )
+    unnamed = [a for k, a in arrays.items() if not k.startswith("net.")]
+    if len(unnamed) != 1 or not np.array_equal(unnamed[0], net.diff.numpy().T):
+        raise ValueError(f"{VALUES_FILE}: the unnamed initializers are not the config's diff.T")
+    full = initializers(JACOBIAN_FILE)
+    if any(not np.array_equal(full.get(f"net.{k}"), v) for k, v in loaded.items()):
+        raise ValueError(f"{JACOBIAN_FILE} holds other weights than {VALUES_FILE}")
+    with torch.no_grad():
+        for name, value in loaded.items():
+            parameters[name].copy_(torch.from_numpy(np.array(value, dtype=np.float32)))
+    return net.float().eval()
+
+
+def reexport_row(directory: Path) -> dict:
+    """Write ``jacobian_row.onnx`` from the weights of the committed ``values.onnx``; check it on the
+    check batch against torch and against the rows of the committed ``jacobian.onnx`` (and the rebuilt
+    network against both committed graphs), all within ``EXPORT_TOLERANCE``. Returns the check."""
+    net = load_exported(directory)
+    f, h = check_inputs(net)
+    feeds = {"f_star": f, "h_star": h}
+    values = _session(directory / VALUES_FILE).run([OUTPUT_NAMES[0]], feeds)[0]
+    full_f, jacobian = _session(directory / JACOBIAN_FILE).run(list(OUTPUT_NAMES), feeds)
+    with torch.no_grad():
+        ours = [t.numpy() for t in net.with_jacobian(torch.from_numpy(f), torch.from_numpy(h))]
+    _compare(ours[0], values, "the rebuilt network's f", "f", VALUES_FILE)
+    _compare(ours[0], full_f, "the rebuilt network's f", "f", JACOBIAN_FILE)
+    _compare(ours[1], jacobian, "the rebuilt network's jacobian", "jacobian", JACOBIAN_FILE)
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / ROW_FILE
+        row_inputs = (torch.from_numpy(f[:2]), torch.from_numpy(h[:2]), torch.from_numpy(ONE_HOT_ROWS[1]))
+        _export_graph(_WithJacobianRow(net), path, row_inputs, (*INPUT_NAMES, ROW_INPUT), ROW_OUTPUT_NAMES)
+        check = check_row_graph(path, net, jacobian, f, h)
+        os.replace(path, directory / ROW_FILE)
+    return check
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description="Re-export jacobian_row.onnx from the committed weights.")
+    parser.add_argument("--directory", type=Path, default=None, help="default: models/untangler")
+    args = parser.parse_args(argv)
+    directory = args.directory or default_directory()
+    check = reexport_row(directory)
+    meta = json.loads((directory / CONFIG_FILE).read_text())
+    meta["export_check_max_abs_diff"] = {
+        k: v for k, v in meta["export_check_max_abs_diff"].items() if not k.startswith(ROW_FILE)
+    } | check
+    (directory / CONFIG_FILE).write_text(json.dumps(meta, indent=2) + "\n")
+    print(f"{directory / ROW_FILE} re-exported; check: {json.dumps(check)}")
+
+
+if __name__ == "__main__":
+    main()

@@ -26,6 +26,7 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Protocol
 
 import numpy as np
 
@@ -34,10 +35,32 @@ from service.lbfgs import minimize_lbfgs
 from service.strain import RestShape, strain_energy
 
 # fields(layer, x (P, 3), gradient) -> FieldValues
-# untangler(f* (P, N), h* (P, N), jacobian) -> (f (P, N), d f / d (f*, h*) (P, N, 2N) or None)
 INACTIVE = 0.1  # h of a layer made inactive: the fields' saturation value, inside the untangler's range
 LayerFields = Callable[[int, np.ndarray, bool], FieldValues]
-Untangler = Callable[[np.ndarray, np.ndarray, bool], tuple[np.ndarray, np.ndarray | None]]
+FullUntangler = Callable[[np.ndarray, np.ndarray, bool], tuple[np.ndarray, np.ndarray | None]]
+
+
+class Untangler(Protocol):
+    """``untangler(f* (P, N), h* (P, N), jacobian, row=None) -> (f (P, N), d f / d (f*, h*)
+    (P, N, 2N), or only its row k (P, 1, 2N) when row=k, or None without jacobian)``.
+
+    The fit asks for the row of the garment it fits only: the neural operator computes that row alone
+    at a third of the full Jacobian's cost (``NeuralUntangler``)."""
+
+    def __call__(
+        self, f_star: np.ndarray, h_star: np.ndarray, jacobian: bool, row: int | None = None
+    ) -> tuple[np.ndarray, np.ndarray | None]: ...
+
+
+def rows_of(full: FullUntangler) -> Untangler:
+    """An ``Untangler`` from an operator that only returns the whole Jacobian (``(P, N, 2N)``, as
+    ``service.untangle.untangle_with_jacobian``): the row asked for is sliced from it."""
+
+    def untangler(f_star, h_star, jacobian, row=None):
+        f, jac = full(f_star, h_star, jacobian)
+        return f, (jac if jac is None or row is None else jac[:, row : row + 1])
+
+    return untangler
 
 
 @dataclass(frozen=True)
@@ -168,12 +191,12 @@ def fit_garment(
             break
         fl, hl, grad_f, grad_h = lin
         with clock("untangle"):
-            f, jac = untangler(fl, hl, True)
+            f, jac = untangler(fl, hl, True, row=layer)
         # The untangled value is piecewise linear in (f*, h*): linearised at x[idx] with the
-        # operator's Jacobian chained through every layer's field gradient (eq. 11).
+        # operator's Jacobian (its row of this layer) chained through every layer's field gradient (eq. 11).
         r0 = f[:, layer] - target[idx]
-        g = np.einsum("nk,nkd->nd", jac[:, layer, :n_layers], grad_f)
-        g += np.einsum("nk,nkd->nd", jac[:, layer, n_layers:], grad_h)
+        g = np.einsum("nk,nkd->nd", jac[:, 0, :n_layers], grad_f)
+        g += np.einsum("nk,nkd->nd", jac[:, 0, n_layers:], grad_h)
         with clock("optimise"):
             y, nit, ok = _minimise(x, idx, r0, g, rest, settings)
         iterations += nit

@@ -87,16 +87,19 @@ class OutfitModels:
         )  # fmt: skip
 
     def untangler(self, kind: UntanglerKind):
-        """The operator as ``service.fit.Untangler``: (f, Jacobian (P, N, 2N) or None)."""
+        """The operator as ``service.fit.Untangler``: (f, Jacobian (P, N, 2N), only its row k (P, 1, 2N)
+        when called with ``row=k``, or None)."""
+        from service.fit import rows_of
+
         if kind == "neural":
 
-            def neural(f_star, h_star, jacobian):
-                out = self.neural_untangler(f_star, h_star, jacobian=jacobian)
+            def neural(f_star, h_star, jacobian, row=None):
+                out = self.neural_untangler(f_star, h_star, jacobian=jacobian, row=row)
                 return out.f, out.jacobian
 
             return neural
 
-        return untangle_with_jacobian
+        return rows_of(untangle_with_jacobian)
 
 
 @dataclass

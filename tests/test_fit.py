@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from service.fields import FieldValues
-from service.fit import FitSettings, fit_garment
+from service.fit import FitSettings, fit_garment, rows_of
 from service.strain import RestShape, green_strain_norms, strain_energy, strain_energy_reference
 from service.untangle import GAP_DELTA, untangle_with_jacobian
 from tests.meshes import grid_mesh
@@ -76,7 +76,7 @@ def planes(offsets: list[float]):
     return fields
 
 
-reference = untangle_with_jacobian
+reference = rows_of(untangle_with_jacobian)
 
 
 def test_fit_pushes_a_garment_out_of_the_body_to_the_gap():
@@ -131,7 +131,6 @@ def test_only_conflicting_vertices_and_their_rings_move():
     clearance = res.vertices[:, 2] - bump(res.vertices)
     assert clearance.min() > GAP_DELTA - FitSettings().conflict_tol
     assert res.residual_after <= FitSettings().conflict_tol
-
 
 
 def test_a_nan_from_a_field_leaves_the_garment_finite_and_flags_the_fit():
@@ -216,3 +215,38 @@ def test_kept_adjacency_equals_a_fresh_one():
     other = f[:, ::-1].copy()  # other faces (orientation flipped): its own entry, same edges
     assert vertex_neighbours(other, n) is not first
     assert vertex_neighbours(f, n + 1).shape == (n + 1, n + 1)
+
+
+def test_rows_of_slices_the_full_jacobian():
+    rng = np.random.default_rng(4)
+    f, h = rng.normal(scale=0.01, size=(50, 3)), -np.ones((50, 3))
+    full = untangle_with_jacobian(f, h)[1]
+    for k in range(3):
+        values, row = reference(f, h, True, row=k)
+        np.testing.assert_array_equal(row, full[:, k : k + 1])
+        np.testing.assert_array_equal(values, untangle_with_jacobian(f, h)[0])
+    assert reference(f, h, False, row=1)[1] is None and reference(f, h, True)[1].shape == (50, 3, 6)
+
+
+def test_fit_through_the_neural_row_graph_equals_the_full_jacobian_fit():
+    """The fit asks the neural operator for its garment's row of the Jacobian only: the same fit as
+    with the whole Jacobian, to float32 rounding (the rows differ by < 1e-3 where entries reach 1e3)."""
+    pytest.importorskip("onnxruntime")
+    from service.untangle_onnx import NeuralUntangler
+
+    neural = NeuralUntangler(threads=1)
+    calls = []
+
+    def by_row(f_star, h_star, jacobian, row=None):
+        calls.append(row)
+        out = neural(f_star, h_star, jacobian, row=row)
+        return out.f, out.jacobian
+
+    full = rows_of(lambda f_star, h_star, jacobian: tuple(neural(f_star, h_star, jacobian)))
+    fields = planes([0.0, 0.010, 0.008])
+    for layer, z in ((1, 0.010), (2, 0.008)):
+        v, f = _sheet(n=8, z=z)
+        ours, theirs = fit_garment(v, f, layer, 3, fields, by_row), fit_garment(v, f, layer, 3, fields, full)
+        assert ours.ok and ours.linearisations == 1 and layer in calls
+        np.testing.assert_array_equal(ours.optimised, theirs.optimised)
+        np.testing.assert_allclose(ours.vertices, theirs.vertices, rtol=0, atol=1e-7)

@@ -24,7 +24,15 @@ from service.untangle import (
     untangle_minmax,
     untangle_sign_only,
 )
-from service.untangle_onnx import ERROR_BOUND_MM, N_SLOTS, NEAR_SURFACE, PAD_F, PAD_H, NeuralUntangler
+from service.untangle_onnx import (
+    ERROR_BOUND_MM,
+    EXPORT_TOLERANCE,
+    N_SLOTS,
+    NEAR_SURFACE,
+    PAD_F,
+    PAD_H,
+    NeuralUntangler,
+)
 from training.untangler_data import SAMPLERS, sample_layered
 
 
@@ -356,6 +364,41 @@ def test_neural_fit_orders_crossing_layers(neural):
     assert np.all(gap >= GAP_DELTA - bound)
     np.testing.assert_allclose(gap[tangled], GAP_DELTA, atol=bound)
     np.testing.assert_allclose(x[~tangled], c[~tangled], atol=bound)
+
+
+def test_neural_row_call_equals_the_full_call_sliced(neural):
+    rng = np.random.default_rng(91)
+    f, h = sample_layered(rng, 2000)
+    h[:1000, 1:] = rng.uniform(-0.9, 0.9, (1000, N_SLOTS - 1)) * neural.config["config"]["h_band"]
+    for n in (N_SLOTS, 3):
+        full = neural(f[:, :n], h[:, :n])
+        for k in range(n):
+            out = neural(f[:, :n], h[:, :n], row=k)
+            assert out.jacobian.shape == (2000, 1, 2 * n)
+            np.testing.assert_allclose(out.f, full.f, rtol=0, atol=EXPORT_TOLERANCE["f"][0])
+            np.testing.assert_allclose(
+                out.jacobian, full.jacobian[:, k : k + 1], *EXPORT_TOLERANCE["jacobian"][::-1]
+            )
+    assert neural(f, h, jacobian=False, row=2).jacobian is None
+    for bad in (5, -1, True, 1.0):
+        with pytest.raises(ValueError, match="row must be a layer"):
+            neural(f, h, row=bad)
+
+
+def test_row_graph_equals_every_row_of_the_full_graph_on_the_export_check_batch(neural):
+    """What ``python -m export.untangler`` checked when it wrote ``jacobian_row.onnx``, on the
+    committed files: the row graph for each one-hot row against that row of ``jacobian.onnx``."""
+    pytest.importorskip("torch")
+    from export.untangler import check_inputs, max_excess
+    from training.untangler import UntanglerConfig, UntanglerNet
+
+    config = neural.config["config"]
+    f, h = check_inputs(UntanglerNet(UntanglerConfig(**config | {"mixture": tuple(config["mixture"])})))
+    full = neural(f, h)
+    for k in range(N_SLOTS):
+        row = neural(f, h, row=k).jacobian[:, 0]
+        assert max_excess(row, full.jacobian[:, k], EXPORT_TOLERANCE["jacobian"]) <= 0, k
+    np.testing.assert_array_equal(neural(f, h, row=0).jacobian[:, 0], np.tile(np.eye(10)[0], (len(f), 1)))
 
 
 def test_service_does_not_import_torch():

@@ -14,7 +14,7 @@ torch = pytest.importorskip("torch")
 pytest.importorskip("onnx")
 pytest.importorskip("onnxruntime")
 
-from export.untangler import export  # noqa: E402
+from export.untangler import export, load_exported, reexport_row  # noqa: E402
 from service.untangle import untangle  # noqa: E402
 from service.untangle_onnx import CONFIG_FILE, EXPORT_TOLERANCE, PAD_F, PAD_H, NeuralUntangler  # noqa: E402
 from training.untangler import UntanglerConfig, UntanglerNet, evaluate, train  # noqa: E402
@@ -70,6 +70,25 @@ def test_explicit_jacobian_matches_autograd(head, activation):
     torch.testing.assert_close(jac, auto, rtol=1e-10, atol=1e-10)
 
 
+@pytest.mark.parametrize("head", ["pools", "residual"])
+@pytest.mark.parametrize("activation", ["relu", "silu"])
+def test_jacobian_row_is_the_row_weighted_jacobian(head, activation):
+    torch.manual_seed(0)
+    net = UntanglerNet(replace(TINY, head=head, activation=activation)).double()
+    with torch.no_grad():
+        net.out.weight.normal_()
+        net.out.bias.normal_()
+    rng = np.random.default_rng(2)
+    f, h, _ = sample_batch(rng, 64)
+    h[:32, 1:] = rng.uniform(-0.9, 0.9, (32, 4)) * TINY.h_band
+    ft, ht = torch.from_numpy(f), torch.from_numpy(h)
+    values, jac = net.with_jacobian(ft, ht)
+    for row in [*torch.eye(5, dtype=torch.float64), torch.from_numpy(rng.normal(size=5))]:
+        f_row, jac_row = net.with_jacobian_row(ft, ht, row[None])
+        torch.testing.assert_close(f_row, values, rtol=0, atol=0)
+        torch.testing.assert_close(jac_row, row @ jac, rtol=1e-10, atol=1e-10)
+
+
 def test_training_is_deterministic_and_resumable(tiny_net, tmp_path):
     checkpoint = tmp_path / "untangler.ckpt"
     train(TINY, checkpoint, log=silent, stop_at=30)  # an interrupted run
@@ -91,7 +110,14 @@ def test_training_reduces_the_error(tiny_net):
 
 def test_export_round_trip(tiny_net, tmp_path):
     check = export(tiny_net, tmp_path, metrics={"evaluation": {}})
-    assert set(check) == {"values.onnx:f", "jacobian.onnx:f", "jacobian.onnx:jacobian"}
+    assert set(check) == {
+        "values.onnx:f",
+        "jacobian.onnx:f",
+        "jacobian.onnx:jacobian",
+        "jacobian_row.onnx:f",
+        "jacobian_row.onnx:jacobian_row",
+        "jacobian_row.onnx:jacobian_row vs jacobian.onnx",
+    }
     meta = json.loads((tmp_path / CONFIG_FILE).read_text())
     assert meta["config"]["hidden"] == TINY.hidden and meta["delta"] == TINY.delta
     neural = NeuralUntangler(tmp_path, threads=1)
@@ -101,10 +127,34 @@ def test_export_round_trip(tiny_net, tmp_path):
         values, jac = tiny_net.with_jacobian(torch.from_numpy(f).float(), torch.from_numpy(h).float())
     np.testing.assert_allclose(out.f, values.numpy(), rtol=0, atol=EXPORT_TOLERANCE["f"][0])
     np.testing.assert_allclose(out.jacobian, jac.numpy(), rtol=1e-4, atol=1e-4)
+    for k in range(5):
+        np.testing.assert_allclose(
+            neural(f, h, row=k).jacobian[:, 0], jac[:, k].numpy(), rtol=1e-4, atol=1e-4
+        )
     assert np.abs(out.f - untangle(f, h)).max() < 0.5  # a tiny net, but an untangler
+
+
+def test_reexport_rebuilds_the_network_from_the_values_graph(tiny_net, tmp_path):
+    export(tiny_net, tmp_path)
+    net = load_exported(tmp_path)
+    for (name, a), b in zip(tiny_net.state_dict().items(), net.state_dict().values(), strict=True):
+        assert torch.equal(a, b), name
+    (tmp_path / "jacobian_row.onnx").unlink()
+    check = reexport_row(tmp_path)
+    assert max(check.values()) < 1e-4 and (tmp_path / "jacobian_row.onnx").is_file()
+    meta = json.loads((tmp_path / CONFIG_FILE).read_text())
+    (tmp_path / CONFIG_FILE).write_text(json.dumps(meta | {"config": meta["config"] | {"hidden": 8}}))
+    with pytest.raises(ValueError, match="hidden"):
+        load_exported(tmp_path)  # the weights do not fit the config
 
 
 def test_export_raises_beyond_tolerance(tiny_net, tmp_path, monkeypatch):
     monkeypatch.setitem(EXPORT_TOLERANCE, "jacobian", (-1.0, 0.0))
     with pytest.raises(RuntimeError, match="output 'jacobian' differs from torch"):
+        export(tiny_net, tmp_path)
+
+
+def test_export_raises_when_the_row_graph_is_beyond_tolerance(tiny_net, tmp_path, monkeypatch):
+    monkeypatch.setitem(EXPORT_TOLERANCE, "jacobian_row", (-1.0, 0.0))
+    with pytest.raises(RuntimeError, match="jacobian_row.onnx:jacobian_row differs from torch"):
         export(tiny_net, tmp_path)

@@ -81,7 +81,8 @@ def pair_matrix(n: int) -> np.ndarray:
 
 
 class UntanglerNet(torch.nn.Module):
-    """O_theta: ``forward(f_star, h_star) (B, 5) -> f (B, 5)``; ``with_jacobian`` adds ``(B, 5, 10)``.
+    """O_theta: ``forward(f_star, h_star) (B, 5) -> f (B, 5)``; ``with_jacobian`` adds ``(B, 5, 10)``,
+    ``with_jacobian_row`` one weighted row of it ``(B, 10)`` (what the fit needs, ~1/3 of the cost).
 
     Garment k gets f_k = f*_k + a_k u_k with the gate a_k (1 active, 0 inactive, linear in the band).
     Head "residual": u = MLP output. Head "pools": the exact operator's form, a weighted mean over a
@@ -121,12 +122,12 @@ class UntanglerNet(torch.nn.Module):
         """(f (B, 5), dict of intermediates for the Jacobian)."""
         hs = h_star[:, 1:] / self.config.h_band  # (B, 4) garments only: the body's h* is ignored
         x = torch.cat([f_star @ self.diff.T, torch.clamp(hs, -1.0, 1.0)], dim=1)
-        zs = []
+        zs, xs = [], []
         for layer in self.hidden:
             zs.append(layer(x))
-            x = self._act(zs[-1])
+            xs.append(x := self._act(zs[-1]))
         gate = torch.clamp(0.5 - 0.5 * hs, 0.0, 1.0)  # (B, 4)
-        parts = {"hs": hs, "zs": zs, "gate": gate}
+        parts = {"hs": hs, "zs": zs, "xs": xs, "gate": gate}
         out = self.out(x)
         if self.config.head == "residual":
             u = out * self.config.f_scale  # (B, 4) correction (m) if active
@@ -180,6 +181,47 @@ class UntanglerNet(torch.nn.Module):
         rows = torch.cat([df_df, df_dh], dim=2)  # (B, 4, 10)
         body = self.body_row.unsqueeze(0) + 0 * rows[:, :1]  # (B, 1, 10)
         return f, torch.cat([body, rows], dim=1)
+
+    def with_jacobian_row(self, f_star, h_star, row):
+        """``(f (B, 5), row @ jacobian (B, 10))`` for weights ``row (1, 5)`` over the outputs: one
+        vector-Jacobian product, one reverse pass where ``with_jacobian`` makes 4 (a one-hot ``row``
+        gives that row of the Jacobian). The terms are ``with_jacobian``'s contracted with ``row``, laid
+        out for onnxruntime: (garment k, layer j) pairs flattened to 20 columns, broadcasts over them
+        as products with constant 0/1 matrices, ReLU's derivative read from its output (so that the
+        forward's Gemm and ReLU still fuse), the pair differences folded into the first layer."""
+        f, p = self._forward(f_star, h_star)
+        n, g = N_SLOTS, N_SLOTS - 1
+        n_diff = self.diff.shape[0]
+        expand = torch.from_numpy(np.repeat(np.eye(g, dtype=np.float32), n, axis=1)).to(f.dtype)  # (4, 20)
+        sum_k = torch.from_numpy(np.tile(np.eye(n, dtype=np.float32), (g, 1))).to(f.dtype)  # (20, 5)
+        fold = np.zeros((n_diff + g, n + g), dtype=np.float32)  # (14, 9): d input / d (f*, clamped h*_k)
+        fold[:n_diff, :n], fold[n_diff:, n:] = self.diff.numpy(), np.eye(g)
+        in_band = (torch.abs(p["hs"]) < 1.0).to(f.dtype) / self.config.h_band  # d clamp(h/band) / dh
+        dgate = -0.5 * in_band  # (B, 4)
+        wg = row[:, 1:] * p["gate"]  # (B, 4) d (row . f) / d u_k = row_k gate_k
+        if self.config.head == "residual":
+            cot = (wg * self.config.f_scale) @ self.out.weight  # (B, H)
+        else:
+            alpha, rho, spread = (p[k].flatten(1) for k in ("alpha", "rho", "spread"))  # (B, 20)
+            wg_pairs = wg @ expand
+            # d mean_k / d logit_kj = alpha_kj (spread_kj - mean_k), weighted by row_k gate_k
+            w_dev = wg_pairs * (spread - p["mean"] @ expand)
+            cot = torch.cat([w_dev * alpha, self.config.delta * wg], dim=1) @ self.out.weight
+        for i in reversed(range(len(self.hidden))):
+            weight = (
+                self.hidden[i].weight if i else self.hidden[0].weight @ torch.from_numpy(fold).to(f.dtype)
+            )
+            if self.config.activation == "relu":
+                cot = torch.where(p["xs"][i] > 0, cot, 0.0) @ weight
+            else:
+                cot = (cot * self._act_grad(p["zs"][i])) @ weight
+        d_f = row + cot[:, :n]  # (B, 5): f*_k passes through, plus the network
+        d_h = cot[:, n:] * in_band  # (B, 4)
+        if self.config.head == "pools":
+            d_f = d_f + (wg_pairs * alpha) @ sum_k - wg @ self.garment_rows  # d spread
+            d_h = d_h + ((w_dev * rho) @ sum_k[:, 1:]) * dgate  # the gates mask the softmax
+        d_h = d_h + row[:, 1:] * p["u"] * dgate
+        return f, torch.cat([d_f, torch.zeros_like(d_h[:, :1]), d_h], dim=1)  # the body's h* column: 0
 
 
 # ---------------------------------------------------------------- training and evaluation
