@@ -25,14 +25,13 @@ wherever those sets change, which trilinear interpolation cannot follow.
 
 from __future__ import annotations
 
-import os
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
 from scipy.sparse import csr_matrix
 
 from service.closest import ClosestPoint
+from service.threads import pool
 from service.triangle_table import TriangleTable
 
 BLEND_DISTANCE = 0.03  # m: beyond it only the smooth term remains
@@ -111,17 +110,6 @@ class _TransferRows:
         return TransferWeights(index, weight)
 
 
-_POOLS: dict[tuple[int, int], ThreadPoolExecutor] = {}
-
-
-def _pool(threads: int) -> ThreadPoolExecutor:
-    """The transfer's threads, started once per process (a forked child has none of its parent's)."""
-    key = (os.getpid(), threads)
-    if key not in _POOLS:
-        _POOLS[key] = ThreadPoolExecutor(threads, thread_name_prefix="canonical")
-    return _POOLS[key]
-
-
 @dataclass
 class CanonicalSpace:
     """The mean body (canonical shape) and its closest-point structure."""
@@ -172,7 +160,7 @@ class CanonicalSpace:
 
         if len(blocks) == 1 or self.threads <= 1:
             return [run(b, self.threads) for b in blocks]
-        return list(_pool(self.threads).map(run, blocks))
+        return list(pool("canonical", self.threads).map(run, blocks))
 
     def _transfer_rows(self, points: np.ndarray, workers: int = 1) -> _TransferRows:
         """``transfer_weights`` of ``points (N, 3) float64`` with less work than the reference.

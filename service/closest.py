@@ -11,7 +11,6 @@ candidate, and the two agree bit for bit.
 
 from __future__ import annotations
 
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, fields
 from functools import cached_property
 
@@ -27,6 +26,7 @@ from service.mesh_topology import (  # noqa: F401 (re-exported: tests and caller
     _unique_edges,
     mesh_topology,
 )
+from service.threads import pool
 from service.triangle_bounds import DistanceBounds
 
 
@@ -235,7 +235,7 @@ class ClosestPoint:
         _ = self.topology, self.ring, self.tree, self.fn, self.pseudo, self.bounds
         rounds = -(-len(points) // (QUERY_BLOCK * QUERY_THREADS))
         blocks = np.array_split(points, rounds * QUERY_THREADS)
-        parts = list(_pool().map(lambda b: self._query_block(b, k), blocks))
+        parts = list(pool("closest", QUERY_THREADS).map(lambda b: self._query_block(b, k), blocks))
         return Closest(*(np.concatenate([getattr(p, f.name) for p in parts]) for f in fields(Closest)))
 
     def query_reference(self, points: np.ndarray, k: int = 4) -> Closest:
@@ -311,14 +311,6 @@ class ClosestPoint:
 
 QUERY_BLOCK = 4096
 QUERY_THREADS = 2
-_POOL: list[ThreadPoolExecutor] = []
-
-
-def _pool() -> ThreadPoolExecutor:
-    """The query threads, started once per process."""
-    if not _POOL:
-        _POOL.append(ThreadPoolExecutor(QUERY_THREADS, thread_name_prefix="closest"))
-    return _POOL[0]
 
 
 class KeptQueries:

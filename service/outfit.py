@@ -13,7 +13,6 @@ repair makes the returned meshes meet the measures exactly); a quality report wi
 from __future__ import annotations
 
 import time
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal
@@ -31,6 +30,7 @@ from service.quality import Layer, intersections, penetration
 from service.repair import RepairSettings
 from service.sdf_grid import SdfGrid
 from service.strain import RestShape, green_strain_norms
+from service.threads import pool
 from service.untangle import untangle_with_jacobian
 from service.untangle_onnx import N_SLOTS, NeuralUntangler
 from service.world_untangle import untangle_world
@@ -112,15 +112,7 @@ class Outfit:
     report: dict = field(default_factory=dict)
 
 
-FIT_THREADS = 2
-_POOL: list[ThreadPoolExecutor] = []
-
-
-def _fit_pool() -> ThreadPoolExecutor:
-    """The threads that fit a request's garments side by side, started once per process."""
-    if not _POOL:
-        _POOL.append(ThreadPoolExecutor(FIT_THREADS, thread_name_prefix="fit"))
-    return _POOL[0]
+FIT_THREADS = 2  # garments fitted side by side
 
 
 def _check_garments(models: OutfitModels, garment_ids: list[str]) -> None:
@@ -176,7 +168,7 @@ def make_outfit(
 
         # The garments' fits are independent (each against the others' explicit fields): two at a time,
         # as numpy and onnxruntime release the GIL. The same fits as one after the other, bit for bit.
-        fits = list(_fit_pool().map(fit, range(len(explicit))))
+        fits = list(pool("fit", FIT_THREADS).map(fit, range(len(explicit))))
         fitted = [r.vertices if r.ok and np.all(np.isfinite(r.vertices)) else x0
                   for r, x0 in zip(fits, explicit, strict=True)]  # fmt: skip
         seconds["fit"] = time.perf_counter() - t0

@@ -99,17 +99,10 @@ class TriangleTable:
         np.maximum(d2, 0.0, out=d2)
         return PairTest(d2, (inside, s, u, t_ab, d_ab, t_ac, d_ac, t_bc, d_edge))
 
-    def distance2(self, points: np.ndarray, face: np.ndarray) -> np.ndarray:
-        """Squared distance ``(M,)`` from ``points (M, 3)`` to triangles ``face (M,)``."""
-        return self.test(points, face).d2
-
-    def closest(self, points: np.ndarray, face: np.ndarray, bary: bool = True):
+    def closest(self, points: np.ndarray, face: np.ndarray):
         """Closest point of triangle ``face (M,)`` to ``points (M, 3)``: (barycentric coordinates
-        (M, 3), squared distance (M,)), or only the squared distance without ``bary``. Degenerate
-        triangles fall back to their edges."""
+        (M, 3), squared distance (M,)). Degenerate triangles fall back to their edges."""
         pairs = self.test(points, face)
-        if not bary:
-            return pairs.d2
         wb, wc = pairs.bary_bc(np.arange(len(face)))
         return np.stack([1 - wb - wc, wb, wc], axis=1), pairs.d2
 

@@ -103,7 +103,7 @@ def test_triangle_table_matches_the_reference_closest_points(body):
     np.testing.assert_allclose(np.sqrt(d2), np.linalg.norm(points - ref_point, axis=1), atol=1e-12)
     np.testing.assert_allclose(np.einsum("mk,mkd->md", bary, tri), ref_point, atol=1e-12)
     np.testing.assert_allclose(bary.sum(axis=1), 1.0, atol=1e-12)
-    np.testing.assert_allclose(table.closest(points, np.arange(len(face)), bary=False), d2)
+    np.testing.assert_allclose(table.test(points, np.arange(len(face))).d2, d2)
     # The transfer asks for the barycentric coordinates of chosen pairs only.
     pick = rng.integers(0, len(face), (100, 8))
     wb, wc = table.test(points, np.arange(len(face))).bary_bc(pick)

@@ -51,18 +51,22 @@ def test_samples():
     assert 0.1 < np.mean(~used.all(axis=1)) < 0.3
 
 
-@pytest.mark.parametrize("head", ["pools", "residual"])
-@pytest.mark.parametrize("activation", ["relu", "silu"])
-def test_explicit_jacobian_matches_autograd(head, activation):
+def _jacobian_case(head: str, activation: str, rng: np.random.Generator):
+    """(a float64 net whose every term matters, f*, h* (64, 5) with half the points in the blend band)."""
     torch.manual_seed(0)
     net = UntanglerNet(replace(TINY, head=head, activation=activation)).double()
     with torch.no_grad():
         net.out.weight.normal_()  # away from the small initialisation, so every term matters
         net.out.bias.normal_()
-    rng = np.random.default_rng(1)
     f, h, _ = sample_batch(rng, 64)
     h[:32, 1:] = rng.uniform(-0.9, 0.9, (32, 4)) * TINY.h_band  # inside the blend band
-    ft, ht = torch.from_numpy(f), torch.from_numpy(h)
+    return net, torch.from_numpy(f), torch.from_numpy(h)
+
+
+@pytest.mark.parametrize("head", ["pools", "residual"])
+@pytest.mark.parametrize("activation", ["relu", "silu"])
+def test_explicit_jacobian_matches_autograd(head, activation):
+    net, ft, ht = _jacobian_case(head, activation, np.random.default_rng(1))
     values, jac = net.with_jacobian(ft, ht)
     auto = torch.autograd.functional.jacobian(lambda a, b: net(a, b).sum(0), (ft, ht))
     auto = torch.cat(auto, dim=2).permute(1, 0, 2)  # (B, 5, 10)
@@ -73,15 +77,8 @@ def test_explicit_jacobian_matches_autograd(head, activation):
 @pytest.mark.parametrize("head", ["pools", "residual"])
 @pytest.mark.parametrize("activation", ["relu", "silu"])
 def test_jacobian_row_is_the_row_weighted_jacobian(head, activation):
-    torch.manual_seed(0)
-    net = UntanglerNet(replace(TINY, head=head, activation=activation)).double()
-    with torch.no_grad():
-        net.out.weight.normal_()
-        net.out.bias.normal_()
     rng = np.random.default_rng(2)
-    f, h, _ = sample_batch(rng, 64)
-    h[:32, 1:] = rng.uniform(-0.9, 0.9, (32, 4)) * TINY.h_band
-    ft, ht = torch.from_numpy(f), torch.from_numpy(h)
+    net, ft, ht = _jacobian_case(head, activation, rng)
     values, jac = net.with_jacobian(ft, ht)
     for row in [*torch.eye(5, dtype=torch.float64), torch.from_numpy(rng.normal(size=5))]:
         f_row, jac_row = net.with_jacobian_row(ft, ht, row[None])
