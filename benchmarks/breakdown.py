@@ -6,7 +6,8 @@ Run (a few minutes)::
 
 For the outfits of ``benchmarks.latency`` (every body shape new, no quality measures), the p50 of:
 
-- "2 threads": the request as the service runs it (the latency table's p50);
+- "2 threads": the request as the service runs it (the latency table's p50), and without the
+  world-space squeeze and repair (``make_outfit(repair=False)``: the fit and the body map only);
 - "1 thread": everything on one thread (onnxruntime, the garments' fits, closest-point blocks, the
   body map's blocks), and of that one-thread time the part spent inside onnxruntime's ``run`` (field
   and untangler networks), inside scipy's KD-tree queries (nearest vertices of the closest-point
@@ -71,14 +72,14 @@ def _instrumented(threads: int):
         service.closest.cKDTree, service.closest.QUERY_THREADS, service.outfit.FIT_THREADS = saved
 
 
-def measure(models: OutfitModels, ids: list[str], betas: np.ndarray) -> dict[str, float]:
+def measure(models: OutfitModels, ids: list[str], betas: np.ndarray, repair: bool = True) -> dict[str, float]:
     """p50 (ms) over ``betas`` of the total and of the time inside onnxruntime and the KD-tree."""
     rows = []
     for beta in betas:
         for key in SPENT:
             SPENT[key] = 0.0
         t0 = time.perf_counter()
-        make_outfit(models, ids, beta, measure=False)
+        make_outfit(models, ids, beta, measure=False, repair=repair)
         rows.append((time.perf_counter() - t0, SPENT["onnxruntime"], SPENT["kdtree"]))
     total, onnx, kd = np.median(np.array(rows) * 1e3, axis=0)
     return {"total": total, "onnxruntime": onnx, "kdtree": kd}
@@ -97,16 +98,19 @@ def main(argv=None) -> None:
             models = OutfitModels.load(threads=threads)
             make_outfit(models, ["shorts"], betas[0], measure=False)  # warm-up
             results[threads] = {ids: measure(models, list(ids), betas) for ids in OUTFITS}
+            if threads == 2:
+                results["no repair"] = {ids: measure(models, list(ids), betas, False) for ids in OUTFITS}
     print(f"## Time per request, p50 over {args.bodies} new body shapes (ms)")
-    columns = ("2 threads", "1 thread", "in onnxruntime", "in KD-tree", "numpy + Python", "floor on 2 cores")
+    columns = ("2 threads", "2 threads, no repair", "1 thread", "in onnxruntime", "in KD-tree")
+    columns += ("numpy + Python", "floor on 2 cores")
     print(f"| outfit | {' | '.join(columns)} |")
-    print("|---|---:|---:|---:|---:|---:|---:|")
+    print("|---|" + "---:|" * len(columns))
     for ids in OUTFITS:
-        two, one = results[2][ids], results[1][ids]
+        two, bare, one = results[2][ids], results["no repair"][ids], results[1][ids]
         rest = one["total"] - one["onnxruntime"] - one["kdtree"]
         floor = (one["onnxruntime"] + one["kdtree"]) / 2
         print(
-            f"| body + {' + '.join(ids)} | {two['total']:.0f} | {one['total']:.0f} | "
+            f"| body + {' + '.join(ids)} | {two['total']:.0f} | {bare['total']:.0f} | {one['total']:.0f} | "
             f"{one['onnxruntime']:.0f} | {one['kdtree']:.0f} | {rest:.0f} | {floor:.0f} |"
         )
 
