@@ -18,14 +18,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from service.mesh import check_mesh, face_normals
-from service.mesh_topology import (  # noqa: F401 (re-exported: tests and callers name them here)
-    LazyPseudoNormals,
-    MeshTopology,
-    PseudoNormals,
-    _sum_into,
-    _unique_edges,
-    mesh_topology,
-)
+from service.mesh_topology import LazyPseudoNormals, MeshTopology, PseudoNormals, mesh_topology
 from service.threads import pool
 from service.triangle_bounds import DistanceBounds
 
@@ -86,8 +79,6 @@ class Closest:
     distance: np.ndarray  # (N,) unsigned distance
     signed: np.ndarray  # (N,) signed by the pseudo-normal: negative inside a closed outward mesh
     normal: np.ndarray  # (N, 3) unit normal of that face
-
-
 
 
 def _finish(points, vertices, faces, fn, face, bary, pseudo: PseudoNormals, point=None) -> Closest:

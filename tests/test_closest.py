@@ -7,19 +7,17 @@ from __future__ import annotations
 import numpy as np
 import trimesh
 
-from service.closest import (
-    ClosestPoint,
-    DistanceBounds,
+from service.closest import ClosestPoint, closest_on_triangles, closest_point_reference
+from service.mesh import face_normals, face_normals_reference
+from service.mesh_topology import (
     LazyPseudoNormals,
     MeshTopology,
     PseudoNormals,
     _sum_into,
     _unique_edges,
-    closest_on_triangles,
-    closest_point_reference,
     mesh_topology,
 )
-from service.mesh import face_normals, face_normals_reference
+from service.triangle_bounds import DistanceBounds
 
 
 def test_unique_edges_is_np_unique():
