@@ -16,7 +16,7 @@ import time
 import numpy as np
 
 from export.body import PARITY_SAMPLES, PARITY_SEED, parity_errors_mm, sample_supported_betas
-from service.body import (
+from service.pipeline.body import (
     SUPPORTED_HEIGHT_PARAM,
     SUPPORTED_WEIGHT_PARAM,
     BodyModel,

@@ -17,7 +17,7 @@ For the outfits of ``benchmarks.latency`` (every body shape new, no quality meas
   were free and both cores were always busy. It bounds what compiled code (numba, an extension) for
   the rest could reach without doing less work.
 
-The timers wrap ``onnxruntime.InferenceSession.run`` and the KD-tree class that ``service.closest``
+The timers wrap ``onnxruntime.InferenceSession.run`` and the KD-tree class that ``service.geometry.closest``
 builds its trees with (installed before the models load); they add ~1 us a call.
 """
 
@@ -31,10 +31,10 @@ import numpy as np
 import onnxruntime as ort
 from scipy.spatial import cKDTree
 
-import service.closest
-import service.outfit
+import service.geometry.closest
+import service.pipeline.outfit
 from benchmarks.latency import OUTFITS, SEED
-from service.outfit import OutfitModels, make_outfit
+from service.pipeline.outfit import OutfitModels, make_outfit
 from training.drape.dataset import sample_betas
 
 SPENT = {"onnxruntime": 0.0, "kdtree": 0.0}
@@ -61,15 +61,21 @@ def _instrumented(threads: int):
         finally:
             SPENT["onnxruntime"] += time.perf_counter() - t0
 
-    saved = (service.closest.cKDTree, service.closest.QUERY_THREADS, service.outfit.FIT_THREADS)
+    saved = (
+        service.geometry.closest.cKDTree, service.geometry.closest.QUERY_THREADS,
+        service.pipeline.outfit.FIT_THREADS,
+    )  # fmt: skip
     ort.InferenceSession.run = timed_run
-    service.closest.cKDTree = _TimedTree
-    service.closest.QUERY_THREADS = service.outfit.FIT_THREADS = threads
+    service.geometry.closest.cKDTree = _TimedTree
+    service.geometry.closest.QUERY_THREADS = service.pipeline.outfit.FIT_THREADS = threads
     try:
         yield
     finally:
         ort.InferenceSession.run = run
-        service.closest.cKDTree, service.closest.QUERY_THREADS, service.outfit.FIT_THREADS = saved
+        (
+            service.geometry.closest.cKDTree, service.geometry.closest.QUERY_THREADS,
+            service.pipeline.outfit.FIT_THREADS,
+        ) = saved  # fmt: skip
 
 
 def measure(models: OutfitModels, ids: list[str], betas: np.ndarray, repair: bool = True) -> dict[str, float]:

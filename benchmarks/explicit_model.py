@@ -24,10 +24,10 @@ from pathlib import Path
 
 import numpy as np
 
-from service.body import DEFAULT_BETA, BodyModel
-from service.canonical import CanonicalSpace
-from service.closest import ClosestPoint
-from service.explicit import ExplicitModel
+from service.geometry.closest import ClosestPoint
+from service.pipeline.body import DEFAULT_BETA, BodyModel
+from service.pipeline.canonical import CanonicalSpace
+from service.pipeline.explicit import ExplicitModel
 from training.drape.dataset import DEFAULT_DIR, STATS, load_split
 
 

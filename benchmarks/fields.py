@@ -23,7 +23,7 @@ import numpy as np
 import torch
 
 from benchmarks.untangler import median_ms
-from service.fields import FieldSet, default_directory
+from service.pipeline.fields import FieldSet, default_directory
 from training.fields.net import FieldConfig
 from training.fields.train import (
     Surfaces,

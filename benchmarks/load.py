@@ -6,7 +6,7 @@ Run (starts ``ulnef serve`` on a free 127.0.0.1 port and stops it at the end)::
     python -m benchmarks.load --url http://127.0.0.1:8000     # a server already running on loopback
 
 Outfits are 1-4 garments from GET /v1/garments (tops in stacking order, at most one bottom at a
-random place among them) on random body shapes inside the supported range (``service.body``).
+random place among them) on random body shapes inside the supported range (``service.pipeline.body``).
 Scenarios, each at every concurrency:
 
 - cold: every request a new body shape, so no cache can answer it;
@@ -42,7 +42,7 @@ from benchmarks.loadgen import (
     rss_mb,
     run_requests,
 )
-from service.body import BodyModel
+from service.pipeline.body import BodyModel
 
 SCENARIO_HEADER = ("scenario", "concurrency", "sent", "ok", "rejected", "errors", "p50 ms", "p95 ms",
                    "p99 ms", "req/s", "cache hits", "failures")  # fmt: skip

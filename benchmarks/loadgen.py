@@ -24,7 +24,7 @@ from urllib.parse import urlsplit
 import httpx
 import numpy as np
 
-from service.body import BodyModel, supported_height_range_cm, supported_weight_range_kg
+from service.pipeline.body import BodyModel, supported_height_range_cm, supported_weight_range_kg
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 GLB_MEDIA_TYPE = "model/gltf-binary"
@@ -147,7 +147,8 @@ class Catalog:
 
 
 def random_body(rng: np.random.Generator, body: BodyModel) -> dict[str, float]:
-    """Uniform gender, then height and weight uniform inside the range supported for it (service.body)."""
+    """Uniform gender, then height and weight uniform inside the range supported for it
+    (service.pipeline.body)."""
     gender = round(float(rng.uniform(0.0, 1.0)), 3)
     h_lo, h_hi = supported_height_range_cm(body, gender)
     height = round(float(rng.uniform(h_lo + RANGE_MARGIN, h_hi - RANGE_MARGIN)), 1)

@@ -31,7 +31,7 @@ from benchmarks.loadgen import (
     rss_mb,
     run_requests,
 )
-from service.body import BodyModel
+from service.pipeline.body import BodyModel
 
 
 def covering_outfits(tops: tuple[str, ...], bottoms: tuple[str, ...]) -> list[list[str]]:

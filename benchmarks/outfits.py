@@ -18,7 +18,7 @@ import argparse
 
 import numpy as np
 
-from service.outfit import OutfitModels, make_outfit
+from service.pipeline.outfit import OutfitModels, make_outfit
 from training.drape.dataset import sample_betas
 
 OUTFITS = (

@@ -43,7 +43,7 @@ from benchmarks.loadgen import (
     post_outfit,
     rss_mb,
 )
-from service.body import BodyModel
+from service.pipeline.body import BodyModel
 
 # The soak's own server: a cache small enough to fill (and evict) during the warm-up.
 SOAK_SERVER_ENV = {"ULNEF_CACHE_ENTRIES": "8"}

@@ -20,8 +20,8 @@ import time
 
 import numpy as np
 
-from service.untangle import untangle, untangle_jacobian, untangle_minmax
-from service.untangle_onnx import ERROR_BOUND_MM, NEAR_SURFACE, NeuralUntangler
+from service.pipeline.untangle import untangle, untangle_jacobian, untangle_minmax
+from service.pipeline.untangle_onnx import ERROR_BOUND_MM, NEAR_SURFACE, NeuralUntangler
 from training.untangler_data import SAMPLERS, sample_layered
 
 SIZES = (1, 5000, 15000, 30000)

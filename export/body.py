@@ -6,9 +6,9 @@ Refresh the file (about 10 s once Anny's cache is built; the first build takes ~
 
 With gender, height and weight the only free phenotypes, Anny's rest vertices are exactly
 multilinear in the hat interpolation coefficients of those three phenotypes over their anchors
-(see ``service.body``), so the runtime only needs the 2 x 2 x 3 "corner" bodies at the anchors.
+(see ``service.pipeline.body``), so the runtime only needs the 2 x 2 x 3 "corner" bodies at the anchors.
 They are stored as float32 (rounding error < 1e-4 mm). The export is a contract plus a check: it
-reloads the written file through ``service.body.BodyModel`` and raises unless it reproduces Anny
+reloads the written file through ``service.pipeline.body.BodyModel`` and raises unless it reproduces Anny
 within ``PARITY_TOLERANCE_MM`` on random shapes from the supported range.
 
 npz contents:
@@ -30,8 +30,8 @@ from pathlib import Path
 
 import numpy as np
 
-from service.body import DEFAULT_BETA, SUPPORTED_HEIGHT_PARAM, SUPPORTED_WEIGHT_PARAM, BodyModel
-from service.paths import models_dir
+from service.pipeline.body import DEFAULT_BETA, SUPPORTED_HEIGHT_PARAM, SUPPORTED_WEIGHT_PARAM, BodyModel
+from service.process.paths import models_dir
 from training.anny_body import (
     BETA_LABELS,
     FIXED_PHENOTYPES,

@@ -1,4 +1,5 @@
-"""Export ``models/body/mean_sdf.npz``: the mean body's signed distance on a grid (``service.sdf_grid``).
+"""Export ``models/body/mean_sdf.npz``: the mean body's signed distance on a grid
+(``service.geometry.sdf_grid``).
 
     python -m export.body_sdf [--spacing 0.006]
 
@@ -14,11 +15,11 @@ import time
 
 import numpy as np
 
-from service.body import DEFAULT_BETA, BodyModel
-from service.canonical import CanonicalSpace
-from service.closest import signed_distance
-from service.paths import models_dir
-from service.sdf_grid import SdfGrid
+from service.geometry.closest import signed_distance
+from service.geometry.sdf_grid import SdfGrid
+from service.pipeline.body import DEFAULT_BETA, BodyModel
+from service.pipeline.canonical import CanonicalSpace
+from service.process.paths import models_dir
 
 PAD = 0.12  # m around the body's bounding box: the loosest garment hangs within it
 CLIP = 0.1  # m
@@ -32,7 +33,7 @@ def exact_sdf(space: CanonicalSpace):
 
 def garment_points(space: CanonicalSpace, clip: float) -> np.ndarray:
     """Where the grid is used: every catalog garment's rest vertices within ``clip / 2`` of the body."""
-    from service.catalog import load_catalog
+    from service.pipeline.catalog import load_catalog
 
     x = np.concatenate([g.vertices for g in load_catalog().values()])
     return x[np.abs(signed_distance(space.closest, x)[0]) < clip / 2]

@@ -1,10 +1,10 @@
 """Export the explicit garment models to ONNX: ``python -m export.explicit`` (seconds; also run by
 ``python -m training.explicit``).
 
-The graph is the numpy reference ``service.explicit.ExplicitModel`` in torch: normalise beta, the tanh
-MLP, then mean + coefficients x basis, with the PCA basis stored float16 (as in the npz) and cast in the
-graph. Contract (names, batch axis, opset, tolerance) in ``service.explicit``; the export runs the file
-with onnxruntime on the held-out-like check shapes and raises unless it matches the numpy reference.
+The graph is the numpy reference ``service.pipeline.explicit.ExplicitModel`` in torch: normalise beta, the
+tanh MLP, then mean + coefficients x basis, with the PCA basis stored float16 (as in the npz) and cast in the
+graph. Contract (names, batch axis, opset, tolerance) in ``service.pipeline.explicit``; the export runs the
+file with onnxruntime on the held-out-like check shapes and raises unless it matches the numpy reference.
 """
 
 from __future__ import annotations
@@ -16,8 +16,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from service.catalog import load_catalog
-from service.explicit import (
+from service.pipeline.catalog import load_catalog
+from service.pipeline.explicit import (
     ONNX_BATCH_AXIS,
     ONNX_INPUT,
     ONNX_OPSET,
@@ -26,7 +26,7 @@ from service.explicit import (
     ExplicitModel,
     ExplicitOnnx,
 )
-from service.paths import models_dir
+from service.process.paths import models_dir
 from training.drape.dataset import sample_betas
 
 CHECK_SEED = 11

@@ -1,9 +1,9 @@
 """Export a trained neural field to ONNX (called by ``python -m training.fields``).
 
-The contract (names, points axis, opset, tolerances) lives in ``service.fields``. Two graphs per field:
-values (f, h; what the 30k-point speed target counts) and values with x-gradients. The export is a
-contract plus a check: both files are run with onnxruntime on check points around the surface and the
-export raises unless they match torch within ``EXPORT_TOLERANCE``.
+The contract (names, points axis, opset, tolerances) lives in ``service.pipeline.fields``. Two graphs per
+field: values (f, h; what the 30k-point speed target counts) and values with x-gradients. The export is a
+contract plus a check: both files are run with onnxruntime on check points around the surface and the export
+raises unless they match torch within ``EXPORT_TOLERANCE``.
 
 ``python -m export.fields [ids...]`` re-exports the gradient graphs without retraining: the weights are
 read back from the committed values graphs (``load_exported``), the new graph is checked against torch
@@ -29,7 +29,7 @@ import torch
 from onnx import numpy_helper
 
 from export.untangler import max_excess
-from service.fields import (
+from service.pipeline.fields import (
     CONFIG_FILE,
     EXPORT_TOLERANCE,
     GRADIENT_NAMES,
@@ -181,8 +181,8 @@ def field_entry(net: FieldNet, check: dict, errors: dict, seconds: float) -> dic
 
 
 def main(argv: list[str] | None = None) -> None:
-    from service.catalog import load_catalog
-    from service.fields import BODY, default_directory
+    from service.pipeline.catalog import load_catalog
+    from service.pipeline.fields import BODY, default_directory
     from training.fields.train import Surfaces, held_out
 
     parser = argparse.ArgumentParser(description="Re-export the gradient graphs from the committed weights.")

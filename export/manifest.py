@@ -1,12 +1,12 @@
 """Write ``models/manifest.json``: every committed model file with its size and sha256.
 
-Refresh after changing anything under ``models/`` (``tests/test_manifest.py`` fails until then)::
+Refresh after changing anything under ``models/`` (``tests/process/test_manifest.py`` fails until then)::
 
     python -m export.manifest
 
 The output is deterministic (no timestamps, sorted paths), so an unchanged ``models/`` gives an
 unchanged manifest. The export is a contract plus a check: the written file is re-read with
-``service.manifest.verify_manifest`` and the command fails if it reports anything.
+``service.process.manifest.verify_manifest`` and the command fails if it reports anything.
 """
 
 from __future__ import annotations
@@ -18,14 +18,14 @@ from pathlib import Path
 
 import numpy as np
 
-from service.manifest import (
+from service.process.manifest import (
     FORMAT_VERSION,
     MANIFEST_NAME,
     file_sha256,
     model_files,
     verify_manifest,
 )
-from service.paths import models_dir as default_models_dir
+from service.process.paths import models_dir as default_models_dir
 
 BODY_FILE = "body/anny_shape.npz"
 
@@ -46,7 +46,7 @@ def producer_versions(models_dir: Path) -> dict[str, str]:
 
 
 def build_manifest(models_dir: Path) -> dict:
-    """The manifest of ``models_dir`` as a JSON-ready dict (see ``service.manifest``)."""
+    """The manifest of ``models_dir`` as a JSON-ready dict (see ``service.process.manifest``)."""
     files = [
         {"path": rel, "size": (models_dir / rel).stat().st_size, "sha256": file_sha256(models_dir / rel)}
         for rel in model_files(models_dir)

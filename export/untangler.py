@@ -1,6 +1,6 @@
 """Export the neural untangling operator to ONNX (called by ``python -m training.untangler``).
 
-The contract (input/output names, batch axis, opset, tolerances) lives in ``service.untangle_onnx``.
+The contract (input/output names, batch axis, opset, tolerances) lives in ``service.pipeline.untangle_onnx``.
 Three graphs: ``values.onnx`` (f only, what the 30k-point speed target counts), ``jacobian.onnx``
 (f and its Jacobian w.r.t. f* and h*, computed explicitly inside the graph) and ``jacobian_row.onnx``
 (f and one weighted row of it, what the fit uses). The export is a contract plus a check: every file is
@@ -30,7 +30,7 @@ import onnxruntime as ort
 import torch
 from onnx import numpy_helper
 
-from service.untangle_onnx import (
+from service.pipeline.untangle_onnx import (
     BATCH_AXIS,
     CONFIG_FILE,
     EXPORT_TOLERANCE,

@@ -10,8 +10,8 @@ from pathlib import Path
 
 import yaml
 
-from service.app import CATALOG_NOT_LOADED, create_app, try_load_catalog
-from service.settings import Settings
+from service.server.app import CATALOG_NOT_LOADED, create_app, try_load_catalog
+from service.server.settings import Settings
 
 TABLE_COLUMNS = (
     ("id", "id"),
@@ -50,8 +50,8 @@ def format_table(rows: list[dict]) -> str:
 def cmd_serve(args: argparse.Namespace) -> int:
     import uvicorn
 
-    from service.logs import configure
-    from service.runtime import ModelIntegrityError, check_models
+    from service.server.logs import configure
+    from service.server.runtime import ModelIntegrityError, check_models
 
     settings = Settings(host=args.host, port=args.port)
     configure(settings.log_level, settings.log_format)
@@ -80,9 +80,9 @@ def cmd_garments(args: argparse.Namespace) -> int:
 
 def cmd_outfit(args: argparse.Namespace) -> int:
     """Dress a body, write the GLB, print the quality report as JSON."""
-    from service.body import ShapeOutOfRange, shape_from_measurements
-    from service.gltf import outfit_glb
-    from service.outfit import OutfitModels, make_outfit
+    from service.pipeline.body import ShapeOutOfRange, shape_from_measurements
+    from service.pipeline.gltf import outfit_glb
+    from service.pipeline.outfit import OutfitModels, make_outfit
 
     models = OutfitModels.load(threads=args.threads)
     ids = [g for g in args.garments.split(",") if g]

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from service.catalog import Garment, load_catalog, save_garment
+from service.pipeline.catalog import Garment, load_catalog, save_garment
 
 
 @pytest.fixture(autouse=True)

@@ -20,9 +20,9 @@ import numpy as np
 import pytest
 import uvicorn
 
-from service.catalog import Garment
-from service.gltf import outfit_glb
-from service.tryon import InvalidField, OutfitResult, OutfitSpec, check_garment_ids
+from service.pipeline.catalog import Garment
+from service.pipeline.gltf import outfit_glb
+from service.pipeline.tryon import InvalidField, OutfitResult, OutfitSpec, check_garment_ids
 
 JS_DIR = Path(__file__).parent / "js"
 NODE_MODULES = JS_DIR / "node_modules"

@@ -8,7 +8,7 @@ import uvicorn
 from fastapi import FastAPI
 
 from service.cli import main
-from service.paths import REPO_ROOT
+from service.process.paths import REPO_ROOT
 
 TABLE = """\
 id      name     category  layer rank  vertices  faces  openings

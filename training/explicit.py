@@ -17,8 +17,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from service.explicit import ExplicitModel
-from service.paths import models_dir
+from service.pipeline.explicit import ExplicitModel
+from service.process.paths import models_dir
 from training.drape.dataset import DEFAULT_DIR, load_split
 
 

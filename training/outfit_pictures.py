@@ -12,8 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
-from service.outfit import OutfitModels, make_outfit
-from service.paths import REPO_ROOT
+from service.pipeline.outfit import OutfitModels, make_outfit
+from service.process.paths import REPO_ROOT
 from training.drape.dataset import sample_betas
 from training.pictures import GARMENT_COLORS
 from training.render import PALETTE, MeshLayer, grid, render_views, save_png

@@ -12,9 +12,9 @@ from pathlib import Path
 
 import numpy as np
 
-from service.body import DEFAULT_BETA, BodyModel, measurements_from_shape
-from service.catalog import load_catalog
-from service.paths import REPO_ROOT
+from service.pipeline.body import DEFAULT_BETA, BodyModel, measurements_from_shape
+from service.pipeline.catalog import load_catalog
+from service.process.paths import REPO_ROOT
 from training.render import PALETTE, MeshLayer, grid, render, render_views, save_png
 
 GARMENT_COLORS = {

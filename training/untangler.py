@@ -9,7 +9,7 @@ is inactive and linear over |h*_k| < h_band, so that inactive garments and the b
 exactly; u_k is a learned weighted mean over a pool of layers (head "pools", see ``UntanglerNet``).
 Its inputs are the 10 pairwise differences f*_i - f*_j (the operator commutes with adding a constant
 to every f*) and the clipped h*_k / h_band. Trained with L1 against the exact operator
-(``service.untangle.untangle``) on fresh samples every step (``training.untangler_data``: the paper's
+(``service.pipeline.untangle.untangle``) on fresh samples every step (``training.untangler_data``: the paper's
 distribution, samples concentrated near 0, layered outfits whose layers are a few mm apart and
 sometimes cross; a share of every batch with unused slots padded as inactive). Batch i is drawn from
 ``default_rng((seed, i))``, so a run resumed from its checkpoint ends with the same weights as an
@@ -29,8 +29,8 @@ from typing import Literal
 import numpy as np
 import torch
 
-from service.untangle import GAP_DELTA, untangle
-from service.untangle_onnx import N_SLOTS, NEAR_SURFACE, default_directory
+from service.pipeline.untangle import GAP_DELTA, untangle
+from service.pipeline.untangle_onnx import N_SLOTS, NEAR_SURFACE, default_directory
 from training.untangler_data import SAMPLERS, sample_batch
 
 Activation = Literal["relu", "silu"]

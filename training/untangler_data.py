@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from service.untangle_onnx import N_SLOTS, PAD_F, PAD_H
+from service.pipeline.untangle_onnx import N_SLOTS, PAD_F, PAD_H
 
 
 def sample_paper(rng: np.random.Generator, n: int) -> tuple[np.ndarray, np.ndarray]:

@@ -22,10 +22,10 @@ from pathlib import Path
 import numpy as np
 from scipy.stats import qmc
 
-from service.body import DEFAULT_BETA, BodyModel
-from service.canonical import CanonicalSpace
-from service.catalog import Garment, load_catalog
-from service.closest import ClosestPoint
+from service.geometry.closest import ClosestPoint
+from service.pipeline.body import DEFAULT_BETA, BodyModel
+from service.pipeline.canonical import CanonicalSpace
+from service.pipeline.catalog import Garment, load_catalog
 from training.drape import energy
 from training.drape.solve import DrapeProblem, DrapeSettings, body_planes, drape, stick_to_skin
 

@@ -23,7 +23,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
-from service.mesh import face_normals
+from service.geometry.mesh import face_normals
 
 GRAVITY = 9.81  # m / s^2
 

@@ -13,10 +13,10 @@ from pathlib import Path
 
 import numpy as np
 
-from service.body import DEFAULT_BETA, BodyModel, measurements_from_shape
-from service.canonical import CanonicalSpace
-from service.explicit import ExplicitModel
-from service.paths import REPO_ROOT
+from service.pipeline.body import DEFAULT_BETA, BodyModel, measurements_from_shape
+from service.pipeline.canonical import CanonicalSpace
+from service.pipeline.explicit import ExplicitModel
+from service.process.paths import REPO_ROOT
 from training.drape.dataset import DEFAULT_DIR, load_split
 from training.pictures import GARMENT_COLORS
 from training.render import PALETTE, MeshLayer, grid, render_views, save_png
@@ -77,7 +77,7 @@ def comparison_picture(
 
 
 def main(argv=None) -> None:
-    from service.catalog import load_catalog
+    from service.pipeline.catalog import load_catalog
 
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--data", type=Path, default=DEFAULT_DIR)

@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.optimize
 
-from service.mesh import face_normals
+from service.geometry.mesh import face_normals
 from training.drape import energy
 from training.drape.energy import BodyPlanes, RestShape
 

@@ -11,8 +11,8 @@ import numpy as np
 import torch
 
 from export.fields import export_field, field_entry, write_config
-from service.catalog import load_catalog
-from service.fields import default_directory
+from service.pipeline.catalog import load_catalog
+from service.pipeline.fields import default_directory
 from training.fields.net import FieldConfig, fourier_sigma
 from training.fields.train import BODY, Surfaces, field_errors, held_out, torch_predict, train_field
 

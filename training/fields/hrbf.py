@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from service.mesh import vertex_normals
+from service.geometry.mesh import vertex_normals
 
 MAX_CENTRES = 64
 """Loop vertices kept per opening (evenly along the loop): the HRBF system is 4 n + 4 unknowns."""

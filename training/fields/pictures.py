@@ -20,9 +20,9 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from skimage.measure import marching_cubes  # noqa: E402
 
-from service.body import DEFAULT_BETA  # noqa: E402
-from service.fields import FieldSet  # noqa: E402
-from service.paths import REPO_ROOT  # noqa: E402
+from service.pipeline.body import DEFAULT_BETA  # noqa: E402
+from service.pipeline.fields import FieldSet  # noqa: E402
+from service.process.paths import REPO_ROOT  # noqa: E402
 from training.fields.train import Surfaces  # noqa: E402
 from training.pictures import GARMENT_COLORS  # noqa: E402
 from training.render import PALETTE, MeshLayer, grid, render_views, save_png  # noqa: E402

@@ -6,7 +6,7 @@ of shapes can be drawn), and the body is the mean body for every beta (the diffu
 maps the body of any shape onto it exactly).
 
 - f: signed distance to the mesh, negative on the body side (sign of (x - p) . n at the closest
-  point p, ``service.closest``); grad f = sign (x - p) / |x - p|, the face normal on the surface.
+  point p, ``service.geometry.closest``); grad f = sign (x - p) / |x - p|, the face normal on the surface.
 - h: the covariant field of ``training.fields.hrbf``; for the body a constant -SATURATION (the body
   is always active).
 
@@ -21,8 +21,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from service.closest import ClosestPoint
-from service.mesh import face_normals
+from service.geometry.closest import ClosestPoint
+from service.geometry.mesh import face_normals
 from training.fields.hrbf import SATURATION, Opening, build_openings, covariant_field
 
 PAD = 0.1  # m around the garment's bounding box where fields are sampled and evaluated

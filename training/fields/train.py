@@ -17,11 +17,11 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from service.body import DEFAULT_BETA, BodyModel
-from service.catalog import load_catalog
-from service.explicit import ExplicitModel
-from service.manifest import file_sha256
-from service.paths import models_dir
+from service.pipeline.body import DEFAULT_BETA, BodyModel
+from service.pipeline.catalog import load_catalog
+from service.pipeline.explicit import ExplicitModel
+from service.process.manifest import file_sha256
+from service.process.paths import models_dir
 from training.drape.dataset import sample_betas
 from training.fields.net import FieldConfig, FieldNet
 from training.fields.samples import (

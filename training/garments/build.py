@@ -1,6 +1,6 @@
 """Build the garment catalog around the mean body: ``python -m training.garments``.
 
-Writes ``models/garments/<id>.npz`` and ``catalog.json`` (see ``service.catalog``). The body's
+Writes ``models/garments/<id>.npz`` and ``catalog.json`` (see ``service.pipeline.catalog``). The body's
 signed-distance grid is cached under ``data/cache`` (delete it to rebuild from scratch).
 """
 
@@ -12,10 +12,10 @@ from pathlib import Path
 
 import numpy as np
 
-from service.body import DEFAULT_BETA, BodyModel
-from service.catalog import Garment, save_garment
-from service.mesh import boundary_loops, vertex_normals
-from service.paths import REPO_ROOT, models_dir
+from service.geometry.mesh import boundary_loops, vertex_normals
+from service.pipeline.body import DEFAULT_BETA, BodyModel
+from service.pipeline.catalog import Garment, save_garment
+from service.process.paths import REPO_ROOT, models_dir
 from training.garments.cut import clip_mesh, compact, component_near
 from training.garments.sdf import SurfaceDistance, sample_grid
 from training.garments.specs import CATALOG, Cut, GarmentSpec, NeckCut, SkirtSpec
@@ -119,7 +119,7 @@ def offset_surface(grid, ease: float, distance: SurfaceDistance):
     """
     from skimage.measure import marching_cubes
 
-    from service.mesh import connected_components
+    from service.geometry.mesh import connected_components
 
     values, origin, voxel = grid
     v, f, _, _ = marching_cubes(values, level=ease, spacing=(voxel,) * 3)

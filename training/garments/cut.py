@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from service.mesh import check_mesh, connected_components
+from service.geometry.mesh import check_mesh, connected_components
 
 
 def clip_mesh(vertices: np.ndarray, faces: np.ndarray, values: np.ndarray, eps: float = 1e-9):

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from service.mesh import check_mesh, face_normals
+from service.geometry.mesh import check_mesh, face_normals
 
 
 @dataclass

@@ -1,0 +1,107 @@
+"""Neural fields g(x, beta) = (f, h) of the garments and the body, served with onnxruntime; no torch.
+
+Per field id (a garment id, or ``body``) ``python -m training.fields`` writes into ``models/fields/``:
+
+- ``<id>.onnx``: inputs ``x (P, 3)``, ``beta (1, 3)`` float32 -> ``f (P,)``, ``h (P,)`` float32;
+- ``<id>.grad.onnx``: the same plus ``grad_f (P, 3)``, ``grad_h (P, 3)``, the x-gradients computed
+  forward-mode inside the graph;
+- ``fields.json``: per id the training config, held-out errors and the export check.
+
+x is in canonical space (metres, Anny's frame); f < 0 on the body side, h > 0 beyond the openings
+(DESIGN.md section 3). The body's h is not learned: it is always active, so ``FieldSet`` returns
+h = -1 for it. This module holds the export contract (names, opset, tolerances): ``export/fields.py``
+writes to it, ``NeuralField`` reads it.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import NamedTuple
+
+import numpy as np
+
+from service.process.onnx_session import open_session
+from service.process.paths import models_dir
+
+BODY = "body"
+INPUT_NAMES = ("x", "beta")
+VALUE_NAMES = ("f", "h")
+GRADIENT_NAMES = ("f", "h", "grad_f", "grad_h")
+POINTS_AXIS = "points"
+OPSET = 17
+CONFIG_FILE = "fields.json"
+EXPORT_TOLERANCE = {"f": (2e-6, 1e-4), "h": (2e-6, 1e-4), "grad_f": (1e-4, 1e-3), "grad_h": (1e-4, 1e-3)}
+"""(atol, rtol) of onnxruntime vs torch that an export accepts (values in m, gradients unitless)."""
+
+
+def default_directory() -> Path:
+    return models_dir() / "fields"
+
+
+def values_file(field_id: str) -> str:
+    return f"{field_id}.onnx"
+
+
+def gradient_file(field_id: str) -> str:
+    return f"{field_id}.grad.onnx"
+
+
+class FieldValues(NamedTuple):
+    """f, h ``(P,) float64``; grad_f, grad_h ``(P, 3) float64`` or None when not asked for."""
+
+    f: np.ndarray
+    h: np.ndarray
+    grad_f: np.ndarray | None
+    grad_h: np.ndarray | None
+
+
+BATCH = 8192  # points per onnxruntime call of the values graph
+GRADIENT_BATCH = 4096
+"""Points per call of the gradient graph, whose activations are several times the values graph's: at
+8,192 its buffers outgrew what ``service.process.tuning`` keeps in the heap and every call page-faulted ~28 MB
+in again (a jacket field with gradients at 30,000 points, 2 threads: 90 ms in calls of 8,192, 53 ms in
+calls of 4,096; 2,048 to 6,144 all took 49-57 ms)."""
+
+
+class NeuralField:
+    """The two onnxruntime sessions of one field."""
+
+    def __init__(self, field_id: str, directory: Path | None = None, threads: int = 2):
+        directory = Path(directory or default_directory())
+        self.field_id = field_id
+        self._values = open_session(directory / values_file(field_id), threads)
+        self._gradient = open_session(directory / gradient_file(field_id), threads)
+
+    def __call__(self, x: np.ndarray, beta: np.ndarray, gradient: bool = False) -> FieldValues:
+        """Fields at ``x (P, 3)`` for one shape ``beta (3,)``."""
+        x = np.ascontiguousarray(x, dtype=np.float32)
+        if x.ndim != 2 or x.shape[1] != 3:
+            raise ValueError(f"x must be (P, 3), got {x.shape}")
+        beta = np.asarray(beta, dtype=np.float32).reshape(1, 3)
+        session, names = (self._gradient, GRADIENT_NAMES) if gradient else (self._values, VALUE_NAMES)
+        # Bounded batches bound the activations' memory (a jacket's 10k vertices with gradients
+        # would otherwise take ~100 MB at once); the per-call overhead is ~0.1 ms.
+        batch = GRADIENT_BATCH if gradient else BATCH
+        parts = [
+            session.run(list(names), dict(zip(INPUT_NAMES, (x[s : s + batch], beta), strict=True)))
+            for s in range(0, max(len(x), 1), batch)
+        ]
+        out = [np.concatenate([p[k] for p in parts]).astype(np.float64) for k in range(len(names))]
+        return FieldValues(*out) if gradient else FieldValues(out[0], out[1], None, None)
+
+
+class FieldSet:
+    """Every field in a directory, by id; the body's h is the constant -1 (always active)."""
+
+    def __init__(self, directory: Path | None = None, threads: int = 2):
+        directory = Path(directory or default_directory())
+        self.config = json.loads((directory / CONFIG_FILE).read_text())
+        self.fields = {fid: NeuralField(fid, directory, threads) for fid in self.config["fields"]}
+
+    def __call__(self, field_id: str, x: np.ndarray, beta: np.ndarray, gradient: bool = False) -> FieldValues:
+        out = self.fields[field_id](x, beta, gradient)
+        if field_id != BODY:
+            return out
+        h = np.full_like(out.f, -1.0)
+        return FieldValues(out.f, h, out.grad_f, None if out.grad_h is None else np.zeros_like(out.grad_f))

@@ -1,0 +1,309 @@
+"""Fit a garment mesh to its untangled field (paper 4.2, eq. 10-12; DESIGN.md section 5), numpy + scipy.
+
+For garment layer i with vertices X (initialised with the explicit model's mesh X*):
+
+    E(X) = sum_x (f_i(x) - f*_i(X*_x))^2 + omega * E_strain(X; rest = X*)
+
+f_i is the untangled value of layer i (``untangle`` over every layer's fields f*_k, h*_k at x). The
+paper fits f_i(x) = 0; the learned field is ~1 mm off the explicit mesh, so fitting f_i = 0 would move
+every vertex by that error. Subtracting each vertex's initial value f*_i(X*_x) makes only the
+untangling move vertices, and a vertex where nothing is tangled stays exactly where it is.
+
+The cost is the networks, so (DESIGN.md section 5):
+- values of every layer at every vertex find the vertices off their target (``conflict_tol``); only
+  those and ``ring`` rings of neighbours are optimised, the rest stay fixed;
+- at those vertices the fields and their x-gradients are evaluated once per outer iteration and
+  linearised; L-BFGS-B runs on the linear model (untangler and strain exact) inside a box of
+  +-``trust`` around the linearisation point; ``outer`` re-linearisations follow.
+The gradient chains through the untangler and every layer's field gradient:
+d f_i / dx = sum_k (d O_i / d f*_k) grad f*_k(x) + (d O_i / d h*_k) grad h*_k(x).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Protocol
+
+import numpy as np
+
+from service.pipeline.fields import FieldValues
+from service.pipeline.lbfgs import minimize_lbfgs
+from service.pipeline.strain import RestShape, strain_energy
+
+# fields(layer, x (P, 3), gradient) -> FieldValues
+INACTIVE = 0.1  # h of a layer made inactive: the fields' saturation value, inside the untangler's range
+LayerFields = Callable[[int, np.ndarray, bool], FieldValues]
+FullUntangler = Callable[[np.ndarray, np.ndarray, bool], tuple[np.ndarray, np.ndarray | None]]
+
+
+class Untangler(Protocol):
+    """``untangler(f* (P, N), h* (P, N), jacobian, row=None) -> (f (P, N), d f / d (f*, h*)
+    (P, N, 2N), or only its row k (P, 1, 2N) when row=k, or None without jacobian)``.
+
+    The fit asks for the row of the garment it fits only: the neural operator computes that row alone
+    at a third of the full Jacobian's cost (``NeuralUntangler``)."""
+
+    def __call__(
+        self, f_star: np.ndarray, h_star: np.ndarray, jacobian: bool, row: int | None = None
+    ) -> tuple[np.ndarray, np.ndarray | None]: ...
+
+
+def rows_of(full: FullUntangler) -> Untangler:
+    """An ``Untangler`` from an operator that only returns the whole Jacobian (``(P, N, 2N)``, as
+    ``service.pipeline.untangle.untangle_with_jacobian``): the row asked for is sliced from it."""
+
+    def untangler(f_star, h_star, jacobian, row=None):
+        f, jac = full(f_star, h_star, jacobian)
+        return f, (jac if jac is None or row is None else jac[:, row : row + 1])
+
+    return untangler
+
+
+@dataclass(frozen=True)
+class FitSettings:
+    omega: float = 1e-3
+    """Weight of the strain term (eq. 10): 1 % strain on a triangle costs as much as 0.3 mm misfit."""
+    conflict_tol: float = 2e-4
+    """m: a vertex whose untangled field is this far from its target is optimised."""
+    ring: int = 2
+    """Rings of neighbours optimised with the conflicting vertices."""
+    outer: int = 1
+    """Linearisations of the fields (each followed by an L-BFGS run). 3 instead of 1 cost 3x the fit's
+    time and left as many crossings for the repair (``benchmarks.outfits``, 3 held-out bodies: after
+    the repair the same pairs, 0 in 8 of 9 outfits, the tucked T-shirt on body 1 failing either way)."""
+    inner: int = 10
+    """L-BFGS iterations per linearisation. 20 instead of 10 took 60 ms more for body + T-shirt + jacket
+    and changed no outcome of ``benchmarks.outfits`` after the repair (mean strain 0.010 vs 0.013)."""
+    trust: float = 0.01
+    """m: longest Newton step a vertex starts its L-BFGS from."""
+    reach: float = 0.03
+    """m: a garment layer farther than this from a point takes no part in its untangling."""
+
+
+@dataclass
+class FitResult:
+    vertices: np.ndarray  # (V, 3) fitted, canonical space
+    optimised: np.ndarray  # (V,) bool: vertices that were ever optimised
+    iterations: int  # L-BFGS iterations over all linearisations
+    linearisations: int
+    residual_before: float  # m, max |f_i - target| over the vertices before the fit
+    residual_after: float  # m, the same after (fields re-evaluated)
+    seconds: dict[str, float] = field(default_factory=dict)  # fields / untangle / optimise
+    ok: bool = True  # False when the optimiser failed; vertices then hold the best valid iterate
+    rest: RestShape | None = None  # of the explicit mesh: the report's strain is measured against it
+    values: tuple[np.ndarray, np.ndarray] | None = None
+    """(f*, h*) ``(V, N)`` of every layer at the returned vertices, h* as the networks answer (far
+    layers not made inactive), for the later stages to reuse; None when ``ok`` is False."""
+
+
+def vertex_neighbours(faces: np.ndarray, n_vertices: int):
+    """Sparse vertex adjacency ``(V, V)`` of ``faces (F, 3)`` (shared: do not modify it).
+
+    A garment's faces never change, and one request asks for its adjacency in the fit, the squeeze
+    and every repair pass: it is built once per distinct face array (by content) and kept."""
+    faces = np.ascontiguousarray(faces, dtype=np.int64)
+    key = (n_vertices, faces.shape, hashlib.sha1(faces.tobytes()).digest())
+    with _ADJACENCY_LOCK:
+        found = _ADJACENCY.get(key)
+    if found is None:
+        found = vertex_neighbours_reference(faces, n_vertices)
+        with _ADJACENCY_LOCK:
+            while len(_ADJACENCY) >= ADJACENCY_CACHE:
+                _ADJACENCY.pop(next(iter(_ADJACENCY)))  # the oldest
+            _ADJACENCY[key] = found
+    return found
+
+
+ADJACENCY_CACHE = 32  # face arrays kept: the catalog's garments and a few more
+_ADJACENCY: dict = {}
+_ADJACENCY_LOCK = threading.Lock()
+
+
+def vertex_neighbours_reference(faces: np.ndarray, n_vertices: int):
+    """``vertex_neighbours`` built afresh."""
+    from scipy.sparse import coo_matrix
+
+    e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    e = np.concatenate([e, e[:, ::-1]])
+    return coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n_vertices, n_vertices)).tocsr()
+
+
+def dilate(mask: np.ndarray, adjacency, rings: int) -> np.ndarray:
+    out = mask.copy()
+    for _ in range(rings):
+        out = out | (adjacency @ out.astype(np.float64) > 0)
+    return out
+
+
+def fit_garment(
+    vertices: np.ndarray,
+    faces: np.ndarray,
+    layer: int,
+    n_layers: int,
+    fields: LayerFields,
+    untangler: Untangler,
+    settings: FitSettings = FitSettings(),
+) -> FitResult:
+    """Fit garment ``layer`` (1..N-1; 0 is the body) with explicit mesh ``vertices (V, 3)``,
+    ``faces (F, 3)``, against the fields of all ``n_layers`` layers."""
+    x0 = np.asarray(vertices, dtype=np.float64)
+    if x0.ndim != 2 or x0.shape[1] != 3:
+        raise ValueError(f"vertices must be (V, 3), got {x0.shape}")
+    if not 1 <= layer < n_layers:
+        raise ValueError(f"layer must be a garment layer in 1..{n_layers - 1}, got {layer}")
+    faces = np.asarray(faces)
+    seconds = {"fields": 0.0, "untangle": 0.0, "optimise": 0.0}
+    adjacency = vertex_neighbours(faces, len(x0))
+    clock = _Clock(seconds)
+    with clock("fields"):
+        f_star, h_raw = _values(fields, n_layers, x0)
+        h_star = np.where(far_layers(f_star, layer, settings.reach), INACTIVE, h_raw)
+    if not (np.all(np.isfinite(f_star)) and np.all(np.isfinite(h_raw))):
+        # A network answered NaN or inf: nothing to fit against; the explicit mesh, flagged.
+        return FitResult(x0.copy(), np.zeros(len(x0), dtype=bool), 0, 0, np.nan, np.nan, seconds, False)
+    with clock("untangle"):
+        f_i = untangler(f_star, h_star, False)[0][:, layer]
+    target = f_star[:, layer].copy()  # each vertex keeps its own field value unless untangling moves it
+    residual = f_i - target
+    before = float(np.abs(residual).max())
+    x = x0.copy()
+    optimised = np.zeros(len(x0), dtype=bool)
+    iterations, linearisations, ok = 0, 0, True
+    full_rest, rest, touched = RestShape.build(x0, faces), None, None
+    for _ in range(settings.outer):
+        conflict = np.abs(residual) > settings.conflict_tol
+        if not conflict.any():
+            break
+        optimised |= dilate(conflict, adjacency, settings.ring)
+        idx = np.flatnonzero(optimised)
+        near = optimised[faces].any(axis=1)
+        if touched is None or (near != touched).any():
+            # Only triangles touching an optimised vertex change: the strain of the rest is constant.
+            rest, touched = full_rest.subset(near), near
+        with clock("fields"):
+            lin = _linearise(fields, n_layers, x[idx], f_star[idx], layer, settings.reach)
+        if lin is None:
+            ok = False  # a network answered NaN or inf: keep the last valid iterate
+            break
+        fl, hl, grad_f, grad_h = lin
+        with clock("untangle"):
+            f, jac = untangler(fl, hl, True, row=layer)
+        # The untangled value is piecewise linear in (f*, h*): linearised at x[idx] with the
+        # operator's Jacobian (its row of this layer) chained through every layer's field gradient (eq. 11).
+        r0 = f[:, layer] - target[idx]
+        g = np.einsum("nk,nkd->nd", jac[:, 0, :n_layers], grad_f)
+        g += np.einsum("nk,nkd->nd", jac[:, 0, n_layers:], grad_h)
+        with clock("optimise"):
+            y, nit, ok = _minimise(x, idx, r0, g, rest, settings)
+        iterations += nit
+        linearisations += 1
+        if not ok:
+            break
+        x[idx] = y
+        with clock("fields"):
+            f_new, h_new = _values(fields, n_layers, x[idx])
+        if not (np.all(np.isfinite(f_new)) and np.all(np.isfinite(h_new))):
+            ok = False
+            break
+        f_star[idx], h_raw[idx] = f_new, h_new
+        h_star[idx] = np.where(far_layers(f_new, layer, settings.reach), INACTIVE, h_new)
+        with clock("untangle"):
+            residual[idx] = untangler(f_star[idx], h_star[idx], False)[0][:, layer] - target[idx]
+    values = (f_star, h_raw) if ok else None
+    after = float(np.abs(residual).max())
+    return FitResult(x, optimised, iterations, linearisations, before, after, seconds, ok, full_rest, values)
+
+
+def _values(fields: LayerFields, n_layers: int, x: np.ndarray):
+    """f*, h* ``(P, N)`` of every layer at ``x (P, 3)``, values only."""
+    vals = [fields(k, x, False) for k in range(n_layers)]
+    return np.stack([v.f for v in vals], 1), np.stack([v.h for v in vals], 1)
+
+
+def _linearise(fields: LayerFields, n_layers: int, x: np.ndarray, f_now: np.ndarray, layer: int, reach):
+    """Fields of every layer at ``x (P, 3)`` with x-gradients, for the linearisation: (f*, h* (P, N),
+    grad f*, grad h* (P, N, 3)), or None if a network answered NaN or inf.
+
+    ``f_now (P, N)`` are the current values: a layer farther than ``reach`` from a point is inactive
+    there (``far_layers``), a constant of the fit, so its gradients are 0 and are not evaluated (the
+    gradient graph costs ~5 values; a jacket's sleeves are far from the pants at every vertex).
+    """
+    far = far_layers(f_now, layer, reach)
+    fl, hl = f_now.copy(), np.full(f_now.shape, INACTIVE)
+    grad_f, grad_h = np.zeros(f_now.shape + (3,)), np.zeros(f_now.shape + (3,))
+    for k in range(n_layers):
+        near = np.flatnonzero(~far[:, k])
+        if not len(near):
+            continue
+        v = fields(k, x[near], True)
+        if not all(np.all(np.isfinite(a)) for a in v):
+            return None
+        fl[near, k], hl[near, k], grad_f[near, k], grad_h[near, k] = v
+    return fl, hl, grad_f, grad_h
+
+
+def far_layers(f_star: np.ndarray, layer: int, reach: float) -> np.ndarray:
+    """``(P, N)`` bool: the garment layers other than ``layer`` farther than ``reach`` from each point.
+
+    The untangling moves a layer by millimetres; a layer centimetres away cannot be tangled with
+    the one at the point. Its covariant field still says where it covers the body, and the learned
+    one is wrong far from the garment (a T-shirt's h < 0 on the forearm, 33 cm from its sleeve,
+    which forced a jacket's sleeve 8 mm off the arm as if a T-shirt were between them). The body
+    (layer 0) always takes part: it covers everything.
+    """
+    far = np.abs(f_star) > reach
+    far[:, 0] = False
+    far[:, layer] = False
+    return far
+
+
+def _minimise(x, idx, r0, g, rest, settings: FitSettings):
+    """L-BFGS on the linearised misfit sum (r0 + g . d)^2 plus the exact strain term, over the
+    vertices ``idx``; returns (their new positions (n, 3), iterations, finite).
+
+    It starts from each vertex's own Newton step d = -r0 g / |g|^2 (the misfit's minimum nearest
+    to it, at most ``trust`` long): the misfit is then already 0 and the iterations only trade
+    it against strain, which the plain start (d = 0) reaches only after many more.
+    """
+    y0 = x[idx].copy()
+    used, local = rest.compact(idx)
+    slot = np.searchsorted(used, idx)
+    xl = x[used].copy()
+    gg = np.maximum(np.einsum("nd,nd->n", g, g), 1e-12)
+    step = -(r0 / gg)[:, None] * g
+    length = np.linalg.norm(step, axis=1, keepdims=True)
+    step *= np.minimum(1.0, settings.trust / np.maximum(length, 1e-300))
+
+    def objective(flat):
+        y = flat.reshape(-1, 3)
+        r = r0 + np.einsum("nd,nd->n", g, y - y0)
+        xl[slot] = y
+        es, gs = strain_energy(xl, local)
+        e = float(r @ r) + settings.omega * es
+        return e, (2 * r[:, None] * g + settings.omega * gs[slot]).reshape(-1)
+
+    res = minimize_lbfgs(objective, (y0 + step).reshape(-1), settings.inner, gtol=1e-9, first_step=1e-4)
+    y = res.x.reshape(-1, 3)
+    ok = bool(np.all(np.isfinite(y)))
+    return (y if ok else y0), res.nit, ok
+
+
+class _Clock:
+    """``with clock("stage"):`` adds the block's wall time to ``seconds["stage"]``."""
+
+    def __init__(self, seconds: dict[str, float]):
+        self.seconds = seconds
+
+    def __call__(self, stage: str):
+        self.stage = stage
+        return self
+
+    def __enter__(self):
+        self.t0 = time.perf_counter()
+
+    def __exit__(self, *exc):
+        self.seconds[self.stage] += time.perf_counter() - self.t0

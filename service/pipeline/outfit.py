@@ -1,0 +1,253 @@
+"""The mix-and-match pipeline (paper Figure 2, bottom row; DESIGN.md section 1), no torch.
+
+beta -> body mesh; explicit garment meshes X*_i(beta) in canonical space; every layer's fields at
+every garment vertex; untangle; L-BFGS fit of each garment to its untangled field (``service.pipeline.fit``);
+the diffused body displacement carries everything to the body (world space); the squeeze and the
+exact repair of ``service.pipeline.world_untangle`` (the learned fields are millimetres off the meshes: the
+repair makes the returned meshes meet the measures exactly); a quality report with the measures of
+``service.pipeline.quality`` before (explicit meshes), after the fit alone and after the repair.
+
+``OutfitModels`` loads everything once (it is what a server keeps); ``make_outfit`` is one request.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+
+from service.geometry.closest import signed_distance
+from service.geometry.sdf_grid import SdfGrid
+from service.pipeline.body import DEFAULT_BETA, BodyModel
+from service.pipeline.canonical import CanonicalSpace
+from service.pipeline.catalog import Garment, load_catalog
+from service.pipeline.explicit import ExplicitModel, ExplicitOnnx
+from service.pipeline.fields import BODY, FieldSet, FieldValues
+from service.pipeline.fit import FitResult, FitSettings, fit_garment
+from service.pipeline.quality import Layer, intersections, penetration
+from service.pipeline.repair import RepairSettings
+from service.pipeline.strain import RestShape, green_strain_norms
+from service.pipeline.untangle import untangle_with_jacobian
+from service.pipeline.untangle_onnx import N_SLOTS, NeuralUntangler
+from service.pipeline.world_untangle import untangle_world
+from service.process.threads import pool
+
+UntanglerKind = Literal["neural", "reference"]
+BodyFieldKind = Literal["exact", "neural"]
+MAX_GARMENTS = N_SLOTS - 1
+DEFAULT_FIT = FitSettings()
+DEFAULT_REPAIR = RepairSettings()
+
+
+@dataclass
+class OutfitModels:
+    """Everything a request needs, loaded once."""
+
+    body: BodyModel
+    catalog: dict[str, Garment]
+    explicit: dict[str, ExplicitModel | ExplicitOnnx]
+    fields: FieldSet
+    neural_untangler: NeuralUntangler
+    space: CanonicalSpace
+    body_sdf: SdfGrid | None = None
+
+    def body_field(self, x: np.ndarray, gradient: bool) -> FieldValues:
+        """The body's signed distance in canonical space, where every body is the mean body: the
+        committed grid of its exact distance (``service.geometry.sdf_grid``, ~0.1 mm off), or the exact
+        closest-point query without it (the learned body field is 1.3 mm off, a third of the gap)."""
+        h = np.full(len(x), -1.0)
+        if self.body_sdf is not None:
+            f, grad = self.body_sdf(x, self.exact_body_distance)
+        else:
+            f, grad = self.exact_body_distance(x)
+        return FieldValues(f, h, grad, np.zeros_like(x)) if gradient else FieldValues(f, h, None, None)
+
+    def exact_body_distance(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(signed distance (P,), gradient (P, 3)) to the mean body by closest-point query."""
+        return signed_distance(self.space.closest, x)
+
+    @classmethod
+    def load(cls, directory: Path | None = None, threads: int = 2) -> OutfitModels:
+        from service.process.paths import models_dir
+        from service.process.tuning import tune_process
+
+        tune_process()
+        directory = Path(directory or models_dir())
+        body = BodyModel.load(directory / "body" / "anny_shape.npz")
+        catalog = load_catalog(directory / "garments")
+        explicit = {gid: ExplicitOnnx(gid, directory / "explicit") for gid in catalog}
+        return cls(
+            body, catalog, explicit, FieldSet(directory / "fields", threads),
+            NeuralUntangler(directory / "untangler", threads),
+            CanonicalSpace.build(body.vertices(np.asarray(DEFAULT_BETA)), body.faces, threads),
+            SdfGrid.load(sdf) if (sdf := directory / "body" / "mean_sdf.npz").exists() else None,
+        )  # fmt: skip
+
+    def untangler(self, kind: UntanglerKind):
+        """The operator as ``service.pipeline.fit.Untangler``: (f, Jacobian (P, N, 2N), only its row k (P, 1,
+        2N) when called with ``row=k``, or None)."""
+        from service.pipeline.fit import rows_of
+
+        if kind == "neural":
+
+            def neural(f_star, h_star, jacobian, row=None):
+                out = self.neural_untangler(f_star, h_star, jacobian=jacobian, row=row)
+                return out.f, out.jacobian
+
+            return neural
+
+        return rows_of(untangle_with_jacobian)
+
+
+@dataclass
+class Outfit:
+    """World-space meshes (metres, Anny frame: Z up) and the quality report."""
+
+    body_vertices: np.ndarray  # (Vb, 3)
+    body_faces: np.ndarray
+    garments: list[tuple[str, np.ndarray, np.ndarray]]  # (id, vertices (V, 3), faces (F, 3)), inner first
+    report: dict = field(default_factory=dict)
+
+
+FIT_THREADS = 2  # garments fitted side by side
+
+
+def _check_garments(models: OutfitModels, garment_ids: list[str]) -> None:
+    if not 1 <= len(garment_ids) <= MAX_GARMENTS:
+        raise ValueError(f"garments: between 1 and {MAX_GARMENTS} ids, got {len(garment_ids)}")
+    unknown = [g for g in garment_ids if g not in models.catalog]
+    if unknown:
+        raise ValueError(f"garments: unknown ids {unknown}; allowed: {sorted(models.catalog)}")
+    if len(set(garment_ids)) != len(garment_ids):
+        raise ValueError(f"garments: each id at most once, got {garment_ids}")
+
+
+def make_outfit(
+    models: OutfitModels,
+    garment_ids: list[str],
+    beta: np.ndarray,
+    untangle_layers: bool = True,
+    untangler: UntanglerKind = "neural",
+    settings: FitSettings = DEFAULT_FIT,
+    measure: bool = True,
+    body_field: BodyFieldKind = "exact",
+    repair: bool = True,
+    repair_settings: RepairSettings = DEFAULT_REPAIR,
+) -> Outfit:
+    """Dress the body of shape ``beta (3,)`` in ``garment_ids`` (inner to outer).
+
+    With ``untangle_layers``: the field fit, then (``repair``) the exact repair of
+    ``service.pipeline.repair``.
+    """
+    _check_garments(models, garment_ids)
+    beta = np.asarray(beta, dtype=np.float64)
+    seconds: dict[str, float] = {}
+    t_total = t0 = time.perf_counter()
+    body = models.body.vertices(beta)
+    seconds["body"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    explicit = [models.explicit[g].canonical(beta) for g in garment_ids]
+    faces = [models.catalog[g].faces for g in garment_ids]
+    seconds["explicit"] = time.perf_counter() - t0
+    layer_ids = [BODY, *garment_ids]
+
+    def layer_fields(k, x, gradient):
+        if k == 0 and body_field == "exact":
+            return models.body_field(x, gradient)
+        return models.fields(layer_ids[k], x, beta, gradient)
+
+    fitted, fits = list(explicit), []
+    if untangle_layers:
+        t0 = time.perf_counter()
+        op = models.untangler(untangler)
+
+        def fit(i):
+            return fit_garment(explicit[i], faces[i], i + 1, len(layer_ids), layer_fields, op, settings)
+
+        # The garments' fits are independent (each against the others' explicit fields): two at a time,
+        # as numpy and onnxruntime release the GIL. The same fits as one after the other, bit for bit.
+        fits = list(pool("fit", FIT_THREADS).map(fit, range(len(explicit))))
+        fitted = [r.vertices if r.ok and np.all(np.isfinite(r.vertices)) else x0
+                  for r, x0 in zip(fits, explicit, strict=True)]  # fmt: skip
+        seconds["fit"] = time.perf_counter() - t0
+        # Per kind of work, summed over the garments (overlapping in time: they can add up to more
+        # than "fit").
+        for key in ("fields", "untangle", "optimise"):
+            seconds[key] = sum(r.seconds[key] for r in fits)
+    t0 = time.perf_counter()
+    world = models.space.to_bodies(fitted, body)
+    seconds["world"] = time.perf_counter() - t0
+    fit_world, repairs = world, []
+    if untangle_layers and repair:
+        t0 = time.perf_counter()
+        # Every layer's fields at every fitted vertex, as the fit left them (None: evaluate again).
+        cache = [r.values if r.ok else None for r in fits]
+        world, repairs = untangle_world(models, layer_ids, beta, body, explicit, (fitted, cache), world,
+                                        faces, repair_settings)  # fmt: skip
+        seconds["repair"] = time.perf_counter() - t0
+    outfit = Outfit(body, models.body.faces, list(zip(garment_ids, world, faces, strict=True)))
+    report = {"garments": garment_ids, "beta": beta.tolist(), "untangled": untangle_layers}
+    if untangle_layers:
+        report |= _fit_report(garment_ids, explicit, faces, fits, untangler)
+    if repairs:
+        # What a client checks: the returned meshes cross nothing and no vertex is left inside an inner
+        # layer. False only for orders the repair could not make so (a jacket tucked into pants: its
+        # front hangs below the crotch; README, Outfits).
+        report["crossing_pairs"] = sum(r.crossing_pairs for r in repairs)
+        report["collision_free"] = all(r.crossing_pairs == 0 and r.inside == 0 for r in repairs)
+        report["repair"] = {
+            g: {
+                "moved_vertices": int(r.moved.sum()),
+                "rounds": r.rounds,
+                "crossing_pairs": r.crossing_pairs,
+                "inside_vertices": r.inside,
+            }
+            for g, r in zip(garment_ids, repairs, strict=True)
+        }
+    if measure:
+        t0 = time.perf_counter()
+        before = models.space.to_bodies(explicit, body) if untangle_layers else world
+        report |= _measures(models, layer_ids, body, beta, explicit, before, fitted, world, faces)
+        if repairs:
+            fit_only = _measures(models, layer_ids, body, beta, explicit, before, fitted, fit_world, faces)
+            report["penetration_fit"] = fit_only["penetration_after"]
+            report["intersections_fit"] = fit_only["intersections_after"]
+        seconds["quality"] = time.perf_counter() - t0
+    seconds["total"] = time.perf_counter() - t_total
+    report["seconds"] = {k: round(v, 4) for k, v in seconds.items()}
+    outfit.report = report
+    return outfit
+
+
+def _fit_report(ids, explicit, faces, fits: list[FitResult], untangler: str) -> dict:
+    out = {"untangler": untangler, "fallback": [g for g, r in zip(ids, fits, strict=True) if not r.ok]}
+    for g, x0, f, r in zip(ids, explicit, faces, fits, strict=True):
+        disp = np.linalg.norm(r.vertices - x0, axis=1)
+        out.setdefault("mean_displacement_mm", {})[g] = round(float(disp.mean()) * 1e3, 3)
+        out.setdefault("max_displacement_mm", {})[g] = round(float(disp.max()) * 1e3, 3)
+        strain = green_strain_norms(r.vertices, r.rest or RestShape.build(x0, f))
+        out.setdefault("mean_green_strain", {})[g] = round(float(strain.mean()), 6)
+        out.setdefault("optimised_vertices", {})[g] = int(r.optimised.sum())
+        out.setdefault("iterations", {})[g] = r.iterations
+        # None where a network answered NaN (the fit then stopped; JSON has no NaN)
+        ends = (r.residual_before, r.residual_after)
+        residual = [round(v * 1e3, 3) if np.isfinite(v) else None for v in ends]
+        out.setdefault("residual_mm", {})[g] = residual
+    return out
+
+
+def _measures(models, layer_ids, body, beta, explicit, before, fitted, world, faces) -> dict:
+    out = {}
+    for name, canonical, meshes in (("before", explicit, before), ("after", fitted, world)):
+        layers = [Layer(BODY, body, models.body.faces)]
+        layers += [Layer(g, v, f) for g, v, f in zip(layer_ids[1:], meshes, faces, strict=True)]
+
+        def h_at(inner, outer, canonical=canonical):
+            return models.fields(layer_ids[inner], canonical[outer - 1], beta).h
+
+        out[f"penetration_{name}"] = {k: round(v, 6) for k, v in penetration(layers, h_at).items()}
+        out[f"intersections_{name}"] = intersections(layers)
+    return out

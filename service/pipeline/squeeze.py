@@ -1,0 +1,146 @@
+"""Squeeze inner garments under the outer ones that cover them, in world space, before the repair.
+
+The repair (``service.pipeline.repair``) only ever moves a layer outwards, over its final inner layers. Where
+an inner garment hangs loose beyond the one that covers it (a T-shirt tucked into tight pants: its
+hem 2-4 cm off the body, the waistband on the skin) that means lifting the pants over the T-shirt's
+hem: a ledge, and crossings left at the hem's rim that 24 rounds did not remove. Cloth does the
+opposite: the tight outer layer presses the loose inner one against the body. The untangling
+operator splits a violation between both layers too, but the fit moves a vertex at most ``trust``
+(1 cm) in canonical space.
+
+So, from the outermost garment inwards, every vertex of a garment that an outer garment covers (its
+covariant field h < 0 at the vertex) and that lies outside that outer mesh, by less than ``band``,
+moves straight towards its closest body point until it is ``margin`` inside the outer mesh (a walk in
+steps of its signed distance), never closer to the body than ``floor``: the caller keeps one margin
+per garment under it, so that a stack of squeezed layers does not collapse onto the skin, where the
+repair would have to lift them apart again.
+
+Towards the closest body point, not along the outer layer's normal: in a concave crease of the outer
+layer (pants under a belly) the normal of the nearest face points through the other side of the
+crease, and 118 of 768 crossings were left that way; along the garment's own normal the tucked
+T-shirt kept 17 crossings. The displacement spreads over ``ring`` rings (the diffusion of the
+repair), so the garment folds in along the outer layer's edge instead of tearing there. The repair
+then pushes whatever the squeeze put inside the body or an inner garment back out, and the outer
+layers over it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from service.geometry.closest import ClosestPoint, KeptQueries
+from service.pipeline.fit import dilate, vertex_neighbours
+from service.pipeline.quality import PENETRATION_BAND
+from service.pipeline.repair import diffuse
+
+
+@dataclass
+class Outer:
+    """An outer layer as one inner garment sees it."""
+
+    mesh: ClosestPoint  # its world-space mesh
+    near: np.ndarray  # (V,) bool: inner vertices that may be within band of it (others never move)
+    covered: np.ndarray  # (V,) bool: inner vertices it covers (its h < 0 there)
+
+
+@dataclass(frozen=True)
+class SqueezeSettings:
+    margin: float = 0.002
+    """m: how far inside the outer layer a squeezed vertex goes (the repair's margin)."""
+    band: float = PENETRATION_BAND
+    """m: a vertex farther outside the outer layer than this is not under it (the quality measure's
+    band: the outer garment's h is only meaningful near it)."""
+    ring: int = 3
+    smoothing: int = 12
+    rounds: int = 3
+    relax: int = 4
+    """Jacobi iterations over the whole moved patch, pulled vertices included, after the diffusion:
+    neighbours pulled towards different sides of an armpit (torso and arm) otherwise part ways and
+    crumple the cloth between them; relaxed, the patch moves as one and the next round pulls again."""
+
+
+@dataclass
+class SqueezeResult:
+    vertices: np.ndarray  # (V, 3)
+    moved: np.ndarray  # (V,) bool
+    outside: int  # covered vertices still outside an outer layer (within band) at the end
+
+
+STEPS = 4  # of the walk towards the body; a vertex still outside after them waits for the next round
+
+
+def _pulls(x: np.ndarray, outer: Outer, kept: KeptQueries, body: KeptQueries, floor: float, settings):
+    """Vertices of ``x (V, 3)`` outside ``outer`` where it covers them, and their targets: (indices
+    (K,), targets (K, 3)). ``kept`` and ``body`` keep the closest points on the outer layer and on the
+    body of the vertices that did not move since the last round."""
+    cand = np.flatnonzero(outer.near & outer.covered)
+    if not len(cand):
+        return cand, np.zeros((0, 3))
+    signed_out = kept.at(x, cand)[0]
+    # 10 % slack, as in the repair: a vertex pulled to the margin lands a rounding error short of it.
+    bad = (signed_out > -0.9 * settings.margin) & (signed_out < settings.band)
+    idx = cand[bad]
+    if not len(idx):
+        return idx, np.zeros((0, 3))
+    signed_body, point_body = body.at(x, idx)[:2]
+    keep = signed_body > 0  # a vertex inside the body is the repair's to move, outwards
+    idx, p, c = idx[keep], x[idx[keep]], point_body[keep]
+    if not len(idx):
+        return idx, np.zeros((0, 3))
+    span = np.maximum(np.linalg.norm(p - c, axis=1), 1e-12)
+    # Walk the kept fraction s of the distance to the body down from 1: the signed distance changes at
+    # most as fast as the point moves, so a step of (distance + margin) never passes the margin inside
+    # the outer layer, and meets it exactly where the walk is along the outer layer's normal; obliquely
+    # it takes a few steps. Never below floor / distance (the outer layer is then on the skin there
+    # and the repair lifts it over this one).
+    low = floor / span  # above 1 where the vertex is already under the floor: out to it
+    s = np.ones(len(idx))
+    signed = signed_out[bad][keep]
+    walking = np.arange(len(idx))
+    for _ in range(STEPS):
+        s[walking] = np.maximum(low[walking], s[walking] - (signed + settings.margin) / span[walking])
+        walking = walking[s[walking] > low[walking]]
+        if not len(walking):
+            break
+        signed = outer.mesh.query(c[walking] + s[walking, None] * (p - c)[walking]).signed
+        keep = signed > -0.9 * settings.margin
+        walking, signed = walking[keep], signed[keep]
+        if not len(walking):
+            break
+    return idx, c + s[:, None] * (p - c)
+
+
+def squeeze_layer(
+    vertices: np.ndarray,
+    faces: np.ndarray,
+    outer: list[Outer],
+    body: ClosestPoint,
+    floor: float,
+    settings: SqueezeSettings = SqueezeSettings(),
+) -> SqueezeResult:
+    """Pull garment ``vertices (V, 3)``, ``faces (F, 3)`` towards the ``body`` mesh, inside the
+    ``outer`` layers that cover it, but no closer to the body than ``floor`` (m)."""
+    x0 = np.asarray(vertices, dtype=np.float64)
+    x = x0.copy()
+    adjacency = vertex_neighbours(np.asarray(faces), len(x))
+    kept = [KeptQueries(layer.mesh, len(x)) for layer in outer]
+    on_body = KeptQueries(body, len(x))
+    outside = 0
+    for round_ in range(settings.rounds + 1):
+        u = np.zeros_like(x)
+        held = np.zeros(len(x), dtype=bool)
+        for layer, queries in zip(outer, kept, strict=True):
+            idx, target = _pulls(x + u, layer, queries, on_body, floor, settings)
+            u[idx] = target - x[idx]
+            held[idx] = True
+        outside = int(held.sum())
+        if not outside or round_ == settings.rounds:
+            break
+        region = dilate(held, adjacency, settings.ring)
+        u = diffuse(u, held, region, adjacency, settings.smoothing)
+        if round_ < settings.rounds - 1:  # the last round puts the pulled vertices where they belong
+            u = diffuse(u, np.zeros_like(held), region, adjacency, settings.relax)
+        x += u
+    return SqueezeResult(x, np.any(x != x0, axis=1), outside)

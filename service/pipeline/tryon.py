@@ -1,0 +1,198 @@
+"""One try-on request from validated values to GLB bytes, HTTP-free.
+
+``OutfitSpec`` is the canonical form of a request (what the cache and the outfit id are keyed on);
+``ModelEngine`` runs it on the loaded models and guarantees a GLB without NaN: a garment whose
+fitted mesh is not finite, or whose untangling raised, falls back to its explicit (tangled) mesh
+and is named in ``report["numerical_fallback"]``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Literal, Protocol
+
+import numpy as np
+
+from service.process.manifest import MANIFEST_NAME
+
+log = logging.getLogger(__name__)
+UntanglerKind = Literal["neural", "reference"]
+# numpy's errors and what a failed solve raises; anything else is a bug and should surface.
+NUMERICAL_ERRORS = (ArithmeticError, np.linalg.LinAlgError, RuntimeError, ValueError)
+
+
+class InvalidField(ValueError):
+    """A request value the models cannot serve: ``field`` is its dotted path, ``allowed`` says what is."""
+
+    def __init__(self, field: str, message: str, allowed: str):
+        super().__init__(message)
+        self.field = field
+        self.allowed = allowed
+
+
+@dataclass(frozen=True)
+class OutfitSpec:
+    """A request in canonical form: garments inner to outer, body in human units, options."""
+
+    garments: tuple[str, ...]
+    gender: float = 0.0
+    height_cm: float = 178.0
+    weight_kg: float = 75.0
+    untangle: bool = True
+    include_body: bool = True
+    measure: bool = False
+    untangler: UntanglerKind = "neural"
+
+    def canonical_json(self) -> str:
+        """Stable text of the request: same outfit, same text (floats by ``repr``, keys sorted)."""
+        fields = asdict(self) | {k: float(getattr(self, k)) for k in ("gender", "height_cm", "weight_kg")}
+        return json.dumps(fields | {"garments": list(self.garments)}, sort_keys=True, separators=(",", ":"))
+
+    def outfit_id(self, model_version: str) -> str:
+        """32 hex chars naming this outfit on these models (a new model version gives new ids)."""
+        text = f"{model_version}\n{self.canonical_json()}"
+        return hashlib.sha256(text.encode()).hexdigest()[:32]
+
+
+@dataclass
+class OutfitResult:
+    """GLB bytes (glTF 2.0, Y up) and the JSON-able quality report."""
+
+    glb: bytes
+    report: dict = field(default_factory=dict)
+
+    @property
+    def nbytes(self) -> int:
+        return len(self.glb)
+
+
+class Engine(Protocol):
+    """What the HTTP layer needs from the pipeline (a fake one in the HTTP tests)."""
+
+    model_version: str
+
+    def garment_ids(self) -> list[str]: ...
+
+    def validate(self, spec: OutfitSpec) -> None:
+        """Raise ``InvalidField`` for what only the models know is wrong (ids, body range)."""
+
+    def make(self, spec: OutfitSpec) -> OutfitResult: ...
+
+
+def check_garment_ids(garments: tuple[str, ...], allowed: list[str], max_garments: int) -> None:
+    """Raise ``InvalidField("garments", ...)`` unless 1..max_garments distinct ids from ``allowed``."""
+    listing = f"1-{max_garments} distinct ids, inner to outer, from: {', '.join(allowed)}"
+    if not 1 <= len(garments) <= max_garments:
+        raise InvalidField("garments", f"{len(garments)} given", listing)
+    unknown = [g for g in garments if g not in allowed]
+    if unknown:
+        raise InvalidField("garments", f"unknown id(s) {unknown}", listing)
+    repeated = sorted({g for g in garments if garments.count(g) > 1})
+    if repeated:
+        raise InvalidField("garments", f"repeated id(s) {repeated}", listing)
+
+
+def model_version(models_dir: Path) -> str:
+    """First 12 hex chars of the manifest's sha256 (it lists every model file's sha256)."""
+    path = Path(models_dir) / MANIFEST_NAME
+    if not path.is_file():
+        return "unversioned"
+    return hashlib.sha256(path.read_bytes()).hexdigest()[:12]
+
+
+def finite_layers(
+    garments: list[tuple[str, np.ndarray, np.ndarray]],
+    fallback: dict[str, np.ndarray],
+) -> tuple[list[tuple[str, np.ndarray, np.ndarray]], list[str]]:
+    """Replace non-finite garment vertices (V, 3) by ``fallback[id]`` (V, 3); returns layers and the
+    ids replaced. Garments still not finite are dropped and listed too, so no NaN reaches a GLB."""
+    out, flagged = [], []
+    for gid, v, f in garments:
+        if np.all(np.isfinite(v)):
+            out.append((gid, v, f))
+            continue
+        flagged.append(gid)
+        alt = fallback.get(gid)
+        if alt is not None and np.all(np.isfinite(alt)):
+            out.append((gid, alt, f))
+    return out, flagged
+
+
+class ModelEngine:
+    """``Engine`` over ``service.pipeline.outfit.OutfitModels`` (thread-safe: onnxruntime sessions are)."""
+
+    def __init__(self, models, version: str):
+        self.models = models
+        self.model_version = version
+
+    @classmethod
+    def load(cls, models_dir: Path, threads: int) -> ModelEngine:
+        from service.pipeline.outfit import OutfitModels
+
+        return cls(OutfitModels.load(models_dir, threads=threads), model_version(models_dir))
+
+    def garment_ids(self) -> list[str]:
+        return list(self.models.catalog)
+
+    def validate(self, spec: OutfitSpec) -> None:
+        from service.pipeline.outfit import MAX_GARMENTS
+
+        check_garment_ids(spec.garments, self.garment_ids(), MAX_GARMENTS)
+        self.beta(spec)
+
+    def beta(self, spec: OutfitSpec) -> np.ndarray:
+        from service.pipeline.body import ShapeOutOfRange, shape_from_measurements
+
+        try:
+            return shape_from_measurements(self.models.body, spec.gender, spec.height_cm, spec.weight_kg)
+        except ShapeOutOfRange as e:
+            allowed = "a finite number" if e.allowed is None else f"{e.allowed[0]:.1f}-{e.allowed[1]:.1f}"
+            raise InvalidField(f"body.{e.field}", str(e), allowed) from None
+
+    def make(self, spec: OutfitSpec) -> OutfitResult:
+        from service.pipeline.gltf import outfit_glb
+        from service.pipeline.outfit import make_outfit
+
+        beta = self.beta(spec)
+        ids = list(spec.garments)
+
+        def explicit_outfit():
+            return make_outfit(self.models, ids, beta, untangle_layers=False, measure=False)
+
+        flagged: list[str] = []
+        try:
+            outfit = make_outfit(self.models, ids, beta, spec.untangle, spec.untangler, measure=spec.measure)
+        except NUMERICAL_ERRORS as e:
+            if not spec.untangle:
+                raise
+            log.warning("untangling failed, serving explicit meshes: %r", e)
+            outfit, flagged = explicit_outfit(), list(ids)
+        garments = outfit.garments
+        if not all(np.all(np.isfinite(v)) for _, v, _ in garments):
+            explicit = {g: v for g, v, _ in explicit_outfit().garments}
+            garments, bad = finite_layers(garments, explicit)
+            flagged += bad
+        layers = [(g, v, f) for g, v, f in garments]
+        if spec.include_body:
+            layers.insert(0, ("body", outfit.body_vertices, outfit.body_faces))
+        report = dict(outfit.report)
+        report["numerical_fallback"] = flagged
+        report["garments_served"] = [g for g, _, _ in garments]
+        return OutfitResult(outfit_glb(layers), report)
+
+
+def self_test(engine: Engine, garments: list[str], untangle: bool) -> OutfitResult:
+    """Make one outfit and check it end to end; raises RuntimeError naming what failed."""
+    spec = OutfitSpec(garments=tuple(garments), untangle=untangle)
+    result = engine.make(spec)
+    if result.glb[:4] != b"glTF":
+        raise RuntimeError("self-test outfit: not a GLB")
+    if result.report.get("numerical_fallback"):
+        raise RuntimeError(f"self-test outfit fell back on {result.report['numerical_fallback']}")
+    if result.report.get("garments_served", list(garments)) != list(garments):
+        raise RuntimeError(f"self-test outfit lost garments: {result.report.get('garments_served')}")
+    return result

@@ -1,0 +1,115 @@
+"""World-space untangling of the fitted outfit: the squeeze, then the exact repair, inner to outer.
+
+``untangle_world`` runs ``service.pipeline.squeeze`` (inner garments pressed under the outer ones that cover
+them) and ``service.pipeline.repair`` (every layer lifted clear of its final inner layers, exact crossing
+tests) on the world meshes the fit and the body map produced, and repeats both where faults remain. Which
+vertices can be near a layer, and where it covers them, comes from the fields at the fitted canonical vertices
+(``_field_at``). ``models`` is a ``service.pipeline.outfit.OutfitModels``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from service.geometry.closest import ClosestPoint
+from service.pipeline.repair import REACH, Inner, RepairSettings, repair_layer
+from service.pipeline.squeeze import Outer, SqueezeSettings, squeeze_layer
+
+DEFAULT_SQUEEZE = SqueezeSettings()
+PASSES = 3
+BODY_QUERY_PAD = 0.01
+"""m: garment vertices the body's canonical distance puts farther out than the repair's largest margin
+plus this are not asked for their
+closest body points in the repair. World and canonical distances to the body differ by < 6 mm at 99 %
+of garment vertices within 6 cm of 6 held-out bodies (one jacket vertex of 60,000: 38 mm, in an
+armpit); a vertex missed that way still gets asked once a triangle of it is found crossing."""
+
+
+def _field_at(models, layer_ids, beta, fitted, k: int, i: int):
+    """Layer ``k``'s fields (f, h ``(V,)``) at garment ``i``'s fitted canonical vertices: from the fit's
+    values where it left them, else evaluated (values only)."""
+    vertices, cache = fitted
+    if cache[i] is not None:
+        return cache[i][0][:, k], cache[i][1][:, k]
+    v = models.fields(layer_ids[k], vertices[i], beta)
+    return v.f, v.h
+
+
+def untangle_world(models, layer_ids, beta, body, explicit, fitted, world, faces, settings: RepairSettings):
+    """The squeeze then the repair of the fitted world meshes; where faults are left, again from the
+    repaired meshes, up to ``PASSES`` times (the repair lifted an outer layer over an inner one that the
+    squeeze can now press under it: four tops on a heavy body, 123 crossing pairs in the armpits after
+    the first pass, 0 after the second). Returns the meshes with the fewest crossings, then vertices
+    inside, and their ``RepairResult``s. ``fitted`` is (fitted canonical vertices, the fits' field
+    values or None) per garment (``_field_at``)."""
+    best = None
+    start = world
+    body_mesh = ClosestPoint.build(body, models.body.faces)
+    for _ in range(PASSES):
+        squeezed = _squeeze(models, layer_ids, beta, fitted, start, faces, body_mesh)
+        meshes = (explicit, fitted, world, squeezed, faces)
+        out, results = _repair(models, layer_ids, beta, body_mesh, *meshes, settings)
+        # Crossings first: a vertex left inside an inner layer is within the quality bound (0.1 %)
+        # long before a crossing pair is.
+        faults = (sum(r.crossing_pairs for r in results), sum(r.inside for r in results))
+        if best is None or faults < best[0]:
+            best = (faults, out, results)
+        if faults == (0, 0):
+            break
+        start = out
+    return best[1], best[2]
+
+
+def _squeeze(models, layer_ids, beta, fitted, world, faces, body: ClosestPoint) -> list[np.ndarray]:
+    """World meshes with every garment pulled inside the outer ones that cover it
+    (``service.pipeline.squeeze``), from the outermost inwards. Where an outer garment covers a vertex and how
+    far it is comes from the outer garment's fields at the vertex's fitted canonical position, as in
+    ``_repair``."""
+    out = list(world)
+    meshes: dict[int, ClosestPoint] = {}
+    for j in range(len(out) - 2, -1, -1):
+        outer = []
+        for i in range(j + 1, len(out)):
+            f, h = _field_at(models, layer_ids, beta, fitted, i + 1, j)
+            near = np.abs(f) < REACH
+            if not (near & (h < 0)).any():
+                continue
+            if i not in meshes:
+                meshes[i] = ClosestPoint.build(out[i], faces[i])
+            outer.append(Outer(meshes[i], near, h < 0))
+        if outer:
+            floor = (j + 1) * DEFAULT_SQUEEZE.margin  # room for the garments under this one
+            r = squeeze_layer(out[j], faces[j], outer, body, floor, DEFAULT_SQUEEZE)
+            out[j] = r.vertices if np.all(np.isfinite(r.vertices)) else out[j]
+    return out
+
+
+def _repair(models, layer_ids, beta, body: ClosestPoint, explicit, fitted, fit_world, world, faces, settings):
+    """Repaired world meshes and their ``RepairResult``s, each layer against the final inner ones.
+
+    Which vertices can be near an inner layer, and where it covers them, comes from the fields at the
+    layer's fitted canonical vertices (``_field_at``: those the fit left, values only). The
+    fields are those of the explicit meshes: an inner garment that its fit and repair moved by up to
+    s is looked for within ``REACH`` + s."""
+    inner = [(body, True, 0.0)]
+    out, results = [], []
+    for i, (x, f) in enumerate(zip(world, faces, strict=True)):
+        layers = []
+        for k, (mesh, closed, moved) in enumerate(inner):
+            f_k, h_k = _field_at(models, layer_ids, beta, fitted, k, i)
+            reach = REACH + moved
+            near = f_k < reach if closed else np.abs(f_k) < reach
+            # The body's distance is exact (canonical, a grid): only vertices it puts within
+            # max_margin + BODY_QUERY_PAD can be within a margin of the body in world space.
+            query = f_k < settings.max_margin + BODY_QUERY_PAD if closed else None
+            layers.append(Inner(mesh, closed, near, h_k < 0, query))
+        r = repair_layer(x, f, layers, settings)
+        out.append(r.vertices if np.all(np.isfinite(r.vertices)) else x)
+        results.append(r)
+        # How far this layer now is from its explicit mesh, whose fields the outer layers see: the fit
+        # moved it in canonical space (x 1.2 for the stretch of the body map), the squeeze and the
+        # repair in world space.
+        fit_move = float(np.linalg.norm(fitted[0][i] - explicit[i], axis=1).max())
+        moved = 1.2 * fit_move + float(np.linalg.norm(out[-1] - fit_world[i], axis=1).max())
+        inner.append((ClosestPoint.build(out[-1], f), False, moved))
+    return out, results

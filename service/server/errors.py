@@ -1,0 +1,102 @@
+"""Exceptions to HTTP answers: every 4xx names the field and what it accepts; overload and
+deadlines answer 503/504 with Retry-After, never 500.
+
+Body: ``{"detail": "body.height_cm: ...; allowed: ...", "errors": [{"field", "message", "allowed"}]}``.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Callable
+
+from fastapi import FastAPI, Request
+from fastapi.exception_handlers import http_exception_handler
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import JSONResponse
+from starlette.exceptions import HTTPException
+
+from service.pipeline.tryon import InvalidField
+from service.server.runtime import NotReady
+from service.server.schemas import ALLOWED
+from service.server.worker import DeadlineExceeded, Overloaded
+
+NOT_READY_RETRY_S = 5
+
+
+def _field_path(loc: tuple) -> str:
+    """``("body", "body", "height_cm")`` -> ``body.height_cm``; request parts other than the body
+    keep their part name (``path.outfit_id``)."""
+    parts = [str(p) for p in loc]
+    if parts and parts[0] == "body":
+        parts = parts[1:]
+    return ".".join(parts)
+
+
+def _allowed(path: str, extra: bool) -> str:
+    """The ALLOWED entry for a field path: list indices dropped, an unknown field answered by its
+    parent's entry (which lists the known fields)."""
+    key = re.sub(r"\.\d+", "", path)
+    if extra:
+        key = key.rpartition(".")[0]
+    return ALLOWED.get(key, "see openapi.yaml")
+
+
+def field_errors(errors: list[dict], garment_ids: list[str]) -> list[dict]:
+    """pydantic/FastAPI error dicts -> ``[{"field", "message", "allowed"}]``."""
+    out = []
+    for e in errors:
+        path = _field_path(tuple(e.get("loc", ())))
+        kind = e.get("type", "")
+        if kind == "extra_forbidden":
+            message = "unknown field"
+        elif kind == "json_invalid":
+            message = f"malformed JSON ({e.get('ctx', {}).get('error', 'decode error')})"
+            path = ""
+        else:
+            message = str(e.get("msg", "invalid"))
+        allowed = _allowed(path, kind == "extra_forbidden")
+        if path.startswith("garments") and garment_ids:
+            allowed += ": " + ", ".join(garment_ids)
+        out.append({"field": path or "(request body)", "message": message, "allowed": allowed})
+    return out
+
+
+def _summary(errors: list[dict]) -> str:
+    return "; ".join(f"{e['field']}: {e['message']} (allowed: {e['allowed']})" for e in errors)
+
+
+def install(app: FastAPI, garment_ids: Callable[[], list[str]]) -> None:
+    @app.exception_handler(RequestValidationError)
+    async def invalid_request(request: Request, exc: RequestValidationError) -> JSONResponse:
+        errors = field_errors(list(exc.errors()), garment_ids())
+        return JSONResponse({"detail": _summary(errors), "errors": errors}, status_code=422)
+
+    @app.exception_handler(HTTPException)
+    async def http_error(request: Request, exc: HTTPException):
+        # FastAPI's only 400 is a body it could not decode (e.g. not UTF-8): answer it like
+        # malformed JSON, so every bad body is a 422 that says what is allowed.
+        if exc.status_code == 400:
+            errors = [{"field": "(request body)", "message": "malformed JSON (not UTF-8 text)",
+                       "allowed": ALLOWED[""]}]  # fmt: skip
+            return JSONResponse({"detail": _summary(errors), "errors": errors}, status_code=422)
+        return await http_exception_handler(request, exc)
+
+    @app.exception_handler(InvalidField)
+    async def invalid_field(request: Request, exc: InvalidField) -> JSONResponse:
+        errors = [{"field": exc.field, "message": str(exc), "allowed": exc.allowed}]
+        return JSONResponse({"detail": _summary(errors), "errors": errors}, status_code=422)
+
+    @app.exception_handler(NotReady)
+    async def not_ready(request: Request, exc: NotReady) -> JSONResponse:
+        headers = {"Retry-After": str(NOT_READY_RETRY_S)}
+        return JSONResponse({"detail": f"not ready: {exc}"}, status_code=503, headers=headers)
+
+    @app.exception_handler(Overloaded)
+    async def overloaded(request: Request, exc: Overloaded) -> JSONResponse:
+        headers = {"Retry-After": str(exc.retry_after)}
+        return JSONResponse({"detail": f"overloaded: {exc}"}, status_code=503, headers=headers)
+
+    @app.exception_handler(DeadlineExceeded)
+    async def deadline(request: Request, exc: DeadlineExceeded) -> JSONResponse:
+        headers = {"Retry-After": str(NOT_READY_RETRY_S)}
+        return JSONResponse({"detail": f"deadline exceeded: {exc}"}, status_code=504, headers=headers)

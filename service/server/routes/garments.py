@@ -1,0 +1,45 @@
+"""The garment catalog (read from disk: answers before the models finish loading)."""
+
+from __future__ import annotations
+
+import logging
+import zipfile
+from typing import Annotated
+
+from fastapi import APIRouter, Depends, HTTPException
+
+from service.pipeline.catalog import Garment, load_catalog
+from service.server.routes.deps import SettingsDep
+from service.server.schemas import ErrorResponse, GarmentList, GarmentSummary
+from service.server.settings import Settings
+
+log = logging.getLogger(__name__)
+CATALOG_NOT_LOADED = "garment catalog not loaded"
+# What a missing, partial or corrupt catalog raises; anything else is a bug and should surface.
+CATALOG_ERRORS = (OSError, ValueError, KeyError, zipfile.BadZipFile)
+
+router = APIRouter(prefix="/v1", tags=["garments"])
+
+
+def try_load_catalog(settings: Settings) -> dict[str, Garment] | None:
+    try:
+        return load_catalog(settings.garments_dir())
+    except CATALOG_ERRORS as e:
+        log.warning("%s: %s", CATALOG_NOT_LOADED, e)
+        return None
+
+
+def get_catalog(settings: SettingsDep) -> dict[str, Garment]:
+    catalog = try_load_catalog(settings)
+    if catalog is None:
+        raise HTTPException(status_code=503, detail=CATALOG_NOT_LOADED)
+    return catalog
+
+
+CatalogDep = Annotated[dict[str, Garment], Depends(get_catalog)]
+
+
+@router.get("/garments", responses={503: {"model": ErrorResponse, "description": CATALOG_NOT_LOADED}})
+def list_garments(catalog: CatalogDep) -> GarmentList:
+    """The garment catalog."""
+    return GarmentList(garments=[GarmentSummary(**g.summary()) for g in catalog.values()])

@@ -1,0 +1,186 @@
+"""The service's long-lived state: models, readiness, worker pool, cache, metrics.
+
+Start-up (``TryOn.start``) first checks every model file against ``models/manifest.json`` and
+refuses to start on any difference (``ModelIntegrityError``); the models are then loaded and a
+self-test outfit made on a background thread, and ``ready`` turns true only when both succeeded.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import threading
+import time
+from collections.abc import Callable
+from concurrent.futures import Future
+
+from service.pipeline.tryon import Engine, ModelEngine, OutfitResult, OutfitSpec, self_test
+from service.process.manifest import MANIFEST_NAME, REFRESH_COMMAND, verify_manifest
+from service.server.cache import OutfitCache
+from service.server.metrics import Metrics
+from service.server.settings import Settings
+from service.server.worker import BoundedWorker, DeadlineExceeded, Overloaded
+
+log = logging.getLogger(__name__)
+EngineFactory = Callable[[Settings], Engine]
+NOT_LOADED = "models not loaded yet"
+
+
+class ModelIntegrityError(RuntimeError):
+    """The models directory does not match its manifest."""
+
+
+class NotReady(Exception):
+    """Models not loaded, or the self-test has not passed (``detail`` says which)."""
+
+
+def check_models(settings: Settings) -> None:
+    """Raise ``ModelIntegrityError`` listing every file that differs from the manifest."""
+    directory = settings.resolved_models_dir()
+    problems = verify_manifest(directory)
+    if problems:
+        listing = "\n".join(f"  - {p}" for p in problems)
+        raise ModelIntegrityError(
+            f"refusing to start: {directory} does not match its {MANIFEST_NAME} "
+            f"({len(problems)} problem(s)):\n{listing}\n"
+            f"restore the files (git checkout models/), or rebuild with `make models` / `{REFRESH_COMMAND}`"
+        )
+
+
+def load_engine(settings: Settings) -> Engine:
+    return ModelEngine.load(settings.resolved_models_dir(), settings.onnx_threads)
+
+
+class TryOn:
+    def __init__(self, settings: Settings, engine_factory: EngineFactory = load_engine):
+        self.settings = settings
+        self.engine_factory = engine_factory
+        self.engine: Engine | None = None
+        self.ready = False
+        self.detail = NOT_LOADED
+        self.metrics = Metrics()
+        self.cache = OutfitCache(settings.cache_entries, settings.cache_bytes)
+        self.worker = BoundedWorker(settings.workers, settings.queue_size)
+        self._inflight: dict[str, Future[OutfitResult]] = {}
+        self._inflight_lock = threading.Lock()
+        self._loader: threading.Thread | None = None
+
+    # ------------------------------------------------------------ start-up
+
+    def start(self) -> None:
+        """Integrity check now (raises), then load and self-test in the background."""
+        if self.settings.verify_models:
+            check_models(self.settings)
+        self._loader = threading.Thread(target=self._load, name="model-loader", daemon=True)
+        self._loader.start()
+
+    def _load(self) -> None:
+        t0 = time.perf_counter()
+        try:
+            engine = self.engine_factory(self.settings)
+            self.detail = "self-test outfit running"
+            self.engine = engine
+            garments = self.settings.self_test_garments
+            if garments:
+                result = self_test(engine, garments, self.settings.self_test_untangle)
+                self.metrics.observe_stages(result.report.get("seconds", {}))
+        except Exception as e:  # anything at all: stay up, unready, and say why
+            self.detail = f"start-up failed: {type(e).__name__}: {e}"
+            log.exception("model loading or self-test failed")
+            return
+        self.ready, self.detail = True, "ok"
+        self.metrics.ready.set(1)
+        log.info("ready in %.1f s (model version %s)", time.perf_counter() - t0, engine.model_version)
+
+    def wait_loaded(self, timeout: float) -> bool:
+        """Block until the loader thread ended (tests); True when ready."""
+        if self._loader is not None:
+            self._loader.join(timeout)
+        return self.ready
+
+    def stop(self) -> None:
+        self.worker.shutdown()
+
+    # ------------------------------------------------------------ requests
+
+    def require_engine(self) -> Engine:
+        if not self.ready or self.engine is None:
+            raise NotReady(self.detail)
+        return self.engine
+
+    def outfit_id(self, spec: OutfitSpec) -> str:
+        return spec.outfit_id(self.require_engine().model_version)
+
+    async def outfit(self, spec: OutfitSpec) -> tuple[str, OutfitResult, bool]:
+        """(outfit id, result, whether it came from the cache). Raises NotReady, InvalidField,
+        Overloaded, DeadlineExceeded."""
+        engine = self.require_engine()
+        key = spec.outfit_id(engine.model_version)
+        try:
+            return await self._outfit(key, spec, engine)
+        except Overloaded:
+            self.metrics.rejected.labels("overloaded").inc()
+            raise
+
+    async def _outfit(self, key: str, spec: OutfitSpec, engine: Engine) -> tuple[str, OutfitResult, bool]:
+        cached = self.cache.get(key)
+        if cached is not None:
+            self.metrics.cache.labels("hit").inc()
+            return key, cached, True
+        if key not in self._inflight:
+            self.worker.check_room()  # refuse a full house before spending time on validation
+        engine.validate(spec)  # before counting a miss: an invalid request is no cache lookup
+        self.metrics.cache.labels("miss").inc()
+        timeout = self.settings.request_timeout_s
+        future = self._submit(key, spec, engine, time.monotonic() + timeout)
+        # asyncio.wait, not wait_for: a timeout must not cancel a job other requests share.
+        wrapped = asyncio.wrap_future(future)
+        # A job that ends after its request gave up still ends with a result or an exception (dropped
+        # unrun past its deadline): retrieve it, so asyncio does not log it as never retrieved.
+        wrapped.add_done_callback(lambda f: f.cancelled() or f.exception())
+        done, _ = await asyncio.wait({wrapped}, timeout=timeout)
+        try:
+            if not done:
+                raise DeadlineExceeded(f"no outfit within the {timeout:g} s time budget")
+            return key, wrapped.result(), False
+        except DeadlineExceeded:
+            self.metrics.rejected.labels("deadline").inc()
+            raise
+
+    def _submit(self, key: str, spec: OutfitSpec, engine: Engine, deadline: float) -> Future[OutfitResult]:
+        """One job per distinct outfit: identical concurrent requests share it."""
+        with self._inflight_lock:
+            future = self._inflight.get(key)
+            if future is not None:
+                return future
+            future = self.worker.submit(lambda: self._compute(key, spec, engine), deadline)
+            self._inflight[key] = future
+            self._gauges()
+        future.add_done_callback(lambda _: self._done(key))
+        return future
+
+    def _compute(self, key: str, spec: OutfitSpec, engine: Engine) -> OutfitResult:
+        self._gauges()
+        result = engine.make(spec)
+        self.metrics.observe_stages(result.report.get("seconds", {}))
+        self.metrics.fallbacks.inc(len(result.report.get("numerical_fallback", [])))
+        if result.report.get("collision_free") is False:
+            self.metrics.with_crossings.inc()
+        self.cache.put(key, result)
+        return result
+
+    def _done(self, key: str) -> None:
+        with self._inflight_lock:
+            self._inflight.pop(key, None)
+        self._gauges()
+
+    def _gauges(self) -> None:
+        self.metrics.queue_depth.set(self.worker.pending)
+        self.metrics.running.set(self.worker.running)
+        self.metrics.cache_entries.set(len(self.cache))
+        self.metrics.cache_bytes.set(self.cache.nbytes)
+
+    def cached_glb(self, outfit_id: str) -> bytes | None:
+        item = self.cache.get(outfit_id)
+        self.metrics.cache.labels("hit" if item else "miss").inc()
+        return item.glb if item else None

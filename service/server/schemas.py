@@ -1,0 +1,182 @@
+"""Pydantic models of the HTTP API (DESIGN.md section 6): the only place pydantic meets requests.
+
+Requests are strict (no "180" for 180, no true for 1) and closed (unknown fields are errors), so a
+typo in an option is refused instead of silently ignored. Bounds here are the widest the body model
+supports for any gender; the exact height and weight ranges depend on the other two values and are
+checked against the body model (``service.pipeline.body``).
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, StringConstraints, field_validator
+
+from service.pipeline.catalog import Category
+from service.pipeline.outfit import MAX_GARMENTS
+from service.pipeline.tryon import OutfitSpec
+
+GarmentId = Annotated[str, StringConstraints(pattern=r"^[a-z][a-z0-9_]{0,31}$")]
+HEIGHT_CM = (135.0, 215.0)
+WEIGHT_KG = (25.0, 155.0)
+# What each request field accepts, quoted in every 4xx about it.
+ALLOWED = {
+    "": "a JSON object with `garments` (required), `body` and `options`",
+    "garments": f"a list of 1-{MAX_GARMENTS} distinct garment ids, inner to outer (GET /v1/garments)",
+    "body": "an object with `gender`, `height_cm`, `weight_kg`",
+    "body.gender": "a number from 0 (male) to 1 (female)",
+    "body.height_cm": f"a number from {HEIGHT_CM[0]:g} to {HEIGHT_CM[1]:g}; the exact range depends on "
+    "gender",
+    "body.weight_kg": f"a number from {WEIGHT_KG[0]:g} to {WEIGHT_KG[1]:g}; the exact range depends on "
+    "gender and height",
+    "options": "an object with `untangle`, `include_body`, `measure`, `untangler`",
+    "options.untangle": "true or false",
+    "options.include_body": "true or false",
+    "options.measure": "true or false",
+    "options.untangler": "`neural` or `reference`",
+}
+CLOSED = ConfigDict(extra="forbid", strict=True)
+
+
+class BodyShape(BaseModel):
+    model_config = CLOSED
+
+    gender: float = Field(
+        default=0.0, ge=0.0, le=1.0, allow_inf_nan=False, description="0 male .. 1 female (blends between)."
+    )
+    height_cm: float = Field(
+        default=178.0, ge=HEIGHT_CM[0], le=HEIGHT_CM[1], allow_inf_nan=False,
+        description="Body height in cm; the supported range depends on gender.",
+    )  # fmt: skip
+    weight_kg: float = Field(
+        default=75.0, ge=WEIGHT_KG[0], le=WEIGHT_KG[1], allow_inf_nan=False,
+        description="Body mass in kg; the supported range depends on gender and height.",
+    )  # fmt: skip
+
+
+class OutfitOptions(BaseModel):
+    model_config = CLOSED
+
+    untangle: bool = Field(default=True, description="Untangle the layers (false: explicit meshes only).")
+    include_body: bool = Field(default=True, description="Add the body as node `body` to the GLB.")
+    measure: bool = Field(
+        default=False, description="Add penetration and intersection measures to the report (slow)."
+    )
+    untangler: Literal["neural", "reference"] = Field(
+        default="neural", description="Untangling operator: the neural one or the exact reference."
+    )
+
+
+class OutfitRequest(BaseModel):
+    model_config = ConfigDict(
+        extra="forbid",
+        strict=True,
+        json_schema_extra={
+            "examples": [
+                {
+                    "garments": ["pants", "tshirt", "jacket"],
+                    "body": {"gender": 0.0, "height_cm": 180, "weight_kg": 80},
+                    "options": {"untangle": True, "include_body": True},
+                }
+            ]
+        },
+    )
+
+    garments: list[GarmentId] = Field(
+        min_length=1, max_length=MAX_GARMENTS, description="Garment ids, inner to outer, each at most once."
+    )
+    body: BodyShape = Field(default_factory=BodyShape)
+    options: OutfitOptions = Field(default_factory=OutfitOptions)
+
+    @field_validator("garments")
+    @classmethod
+    def _distinct(cls, ids: list[str]) -> list[str]:
+        repeated = sorted({g for g in ids if ids.count(g) > 1})
+        if repeated:
+            raise ValueError(f"repeated id(s) {repeated}")
+        return ids
+
+    def spec(self) -> OutfitSpec:
+        b, o = self.body, self.options
+        return OutfitSpec(tuple(self.garments), float(b.gender), float(b.height_cm), float(b.weight_kg),
+                          o.untangle, o.include_body, o.measure, o.untangler)  # fmt: skip
+
+
+class OutfitCreated(BaseModel):
+    model_config = ConfigDict(
+        json_schema_extra={
+            "example": {
+                "id": "3f1c0d9e8b7a65544332211000ffeedd",
+                "glb_url": "/v1/outfits/3f1c0d9e8b7a65544332211000ffeedd.glb",
+                "cached": False,
+                "report": {
+                    "garments": ["tshirt"],
+                    "untangled": True,
+                    "collision_free": True,
+                    "crossing_pairs": 0,
+                    "numerical_fallback": [],
+                    "seconds": {"body": 0.0005, "total": 0.15},
+                },  # fmt: skip
+            }
+        }
+    )
+
+    id: str = Field(description="Outfit id: a hash of the canonical request and the model version.")
+    glb_url: str = Field(description="GET it for the GLB (while the outfit is in the cache).")
+    cached: bool = Field(description="Whether the outfit came from the cache.")
+    report: dict[str, Any] = Field(
+        description="Quality report: garments, beta, untangling statistics, `collision_free` (no "
+        "triangle pairs crossing between layers and no vertex left inside an inner layer after the "
+        "repair; `crossing_pairs` counts what is left), `numerical_fallback` (garments served unfitted "
+        "after a numerical fault), `seconds` per pipeline stage."
+    )
+
+
+class FieldError(BaseModel):
+    field: str = Field(description="Dotted path of the offending request field (`body.height_cm`).")
+    message: str = Field(description="What is wrong with it.")
+    allowed: str = Field(description="What the field accepts.")
+
+
+class ErrorResponse(BaseModel):
+    detail: str = Field(description="Human-readable reason.")
+    errors: list[FieldError] | None = Field(default=None, description="Per-field problems (4xx on input).")
+
+
+class GarmentSummary(BaseModel):
+    model_config = ConfigDict(
+        json_schema_extra={
+            "example": {
+                "id": "tshirt",
+                "name": "T-shirt",
+                "category": "top",
+                "layer_rank": 1,
+                "vertices": 5210,
+                "faces": 10128,
+                "openings": ["left_sleeve", "neck", "right_sleeve", "waist"],
+            }
+        }
+    )
+
+    id: str = Field(description="Garment id, as used in outfit requests.")
+    name: str = Field(description="Human-readable name.")
+    category: Category = Field(description="`top` or `bottom`.")
+    layer_rank: int = Field(description="Default stacking rank in its category; lower is nearer the body.")
+    vertices: int = Field(description="Vertex count of the rest mesh.")
+    faces: int = Field(description="Triangle count of the rest mesh.")
+    openings: list[str] = Field(description="Names of the garment's openings (boundary loops), sorted.")
+
+
+class GarmentList(BaseModel):
+    garments: list[GarmentSummary] = Field(description="Every catalog garment, in catalog order.")
+
+
+class Health(BaseModel):
+    status: Literal["ok"] = Field(description="Always `ok`: the process answers.")
+
+
+class Readiness(BaseModel):
+    ready: bool = Field(description="Whether models are loaded and the self-test outfit passed.")
+    garments: int | None = Field(default=None, description="Number of catalog garments, when ready.")
+    model_version: str | None = Field(default=None, description="Model version (manifest hash), when ready.")
+    detail: str | None = Field(default=None, description="Why the service is not ready.")

@@ -1,0 +1,247 @@
+"""``service/geometry/closest.py``: the lazily built query against the all-triangles reference, the screened
+query against the one that tests every candidate, the distance bounds that screen against Ericson's
+test, and the bincount sums against the ``np.add.at`` they replace."""
+
+from __future__ import annotations
+
+import numpy as np
+import trimesh
+
+from service.geometry.closest import ClosestPoint, closest_on_triangles, closest_point_reference
+from service.geometry.mesh import face_normals, face_normals_reference
+from service.geometry.mesh_topology import (
+    LazyPseudoNormals,
+    MeshTopology,
+    PseudoNormals,
+    _sum_into,
+    _unique_edges,
+    mesh_topology,
+)
+from service.geometry.triangle_bounds import DistanceBounds
+
+
+def test_unique_edges_is_np_unique():
+    rng = np.random.default_rng(8)
+    for n_v in (50, 1 << 16, (1 << 16) + 1):
+        ends = np.sort(rng.integers(0, n_v, (3000, 2)), axis=1)
+        keys, inverse = _unique_edges(ends[:, 0], ends[:, 1], n_v)
+        expected = np.unique(ends[:, 0] * n_v + ends[:, 1], return_inverse=True)
+        np.testing.assert_array_equal(keys, expected[0])
+        np.testing.assert_array_equal(inverse, expected[1])
+
+
+def test_ring_lists_each_vertexs_faces_in_order():
+    v, f, _ = _bumpy_sphere(4)
+    ring = ClosestPoint.build(v, f).ring
+    for i in range(len(v)):
+        around = np.flatnonzero((f == i).any(axis=1))
+        np.testing.assert_array_equal(ring[i], np.r_[around, [-1] * (ring.shape[1] - len(around))])
+
+
+def _pseudo_normals_add_at(vertices, faces, fn):
+    """PseudoNormals.build as first written, with np.add.at: the reference of the bincount sums."""
+    vertex = np.zeros((len(vertices), 3))
+    for k in range(3):
+        a = vertices[faces[:, (k + 1) % 3]] - vertices[faces[:, k]]
+        b = vertices[faces[:, (k + 2) % 3]] - vertices[faces[:, k]]
+        cos = np.einsum("fd,fd->f", a, b) / np.maximum(
+            np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1), 1e-300
+        )
+        np.add.at(vertex, faces[:, k], np.arccos(np.clip(cos, -1, 1))[:, None] * fn)
+    e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    keys = np.minimum(e[:, 0], e[:, 1]) * len(vertices) + np.maximum(e[:, 0], e[:, 1])
+    edge_keys, inverse, count = np.unique(keys, return_inverse=True, return_counts=True)
+    edge = np.zeros((len(edge_keys), 3))
+    np.add.at(edge, inverse, np.tile(fn, (3, 1)))
+    return vertex, edge_keys, edge, count
+
+
+def _bumpy_sphere(seed: int):
+    rng = np.random.default_rng(seed)
+    sphere = trimesh.creation.icosphere(subdivisions=3, radius=0.1)
+    v = np.asarray(sphere.vertices) * (1 + 0.1 * rng.random((len(sphere.vertices), 1)))
+    return v, np.asarray(sphere.faces), rng
+
+
+def test_sum_into_is_add_at_bit_for_bit():
+    rng = np.random.default_rng(0)
+    index, values = rng.integers(0, 50, 5000), rng.normal(size=(5000, 3))
+    expected = np.zeros((60, 3))
+    np.add.at(expected, index, values)
+    np.testing.assert_array_equal(_sum_into(index, values, 60), expected)
+
+
+def test_pseudo_normals_match_the_add_at_build():
+    sphere = _bumpy_sphere(1)[:2]
+    box = trimesh.creation.box().subdivide()
+    box.update_faces(box.face_normals[:, 2] < 0.5)  # open: edges with one triangle
+    for v, f in (sphere, (np.asarray(box.vertices), np.asarray(box.faces))):
+        fn = face_normals(v, f)
+        got = PseudoNormals.build(v, f, fn)
+        vertex, edge_keys, edge, count = _pseudo_normals_add_at(v, f, fn)
+        np.testing.assert_array_equal(got.vertex, vertex)
+        np.testing.assert_array_equal(got.edge_keys, edge_keys)
+        np.testing.assert_array_equal(got.edge, edge)
+        np.testing.assert_array_equal(got.edge_faces, count)
+    once = trimesh.grouping.group_rows(box.edges_sorted, require_count=1)
+    rim = {tuple(sorted(e)) for e in box.edges[once]}
+    n_v = len(box.vertices)
+    got = ClosestPoint.build(box.vertices, box.faces).boundary_edges
+    assert sorted(got.tolist()) == got.tolist() and {(k // n_v, k % n_v) for k in got.tolist()} == rim
+
+
+def test_query_matches_the_reference_inside_and_outside():
+    v, f, rng = _bumpy_sphere(2)
+    mesh = ClosestPoint.build(v, f)
+    points = rng.normal(size=(300, 3)) * 0.06
+    got, ref = mesh.query(points), closest_point_reference(points, v, f)
+    np.testing.assert_allclose(got.distance, ref.distance, atol=1e-12)
+    np.testing.assert_array_equal(np.sign(got.signed), np.sign(ref.signed))
+    assert (got.signed < 0).any() and (got.signed > 0).any()
+
+
+def test_blocked_threaded_query_is_the_single_block_query_bit_for_bit(monkeypatch):
+    import service.geometry.closest as closest
+
+    sphere = trimesh.creation.icosphere(subdivisions=3, radius=0.1)
+    points = np.random.default_rng(3).normal(scale=0.12, size=(5000, 3))
+    monkeypatch.setattr(closest, "QUERY_BLOCK", 10**9)
+    whole = ClosestPoint.build(sphere.vertices, sphere.faces).query(points)
+    monkeypatch.setattr(closest, "QUERY_BLOCK", 700)  # 8 blocks on the threads
+    blocked = ClosestPoint.build(sphere.vertices, sphere.faces).query(points)
+    for name in ("face", "bary", "point", "distance", "signed", "normal"):
+        np.testing.assert_array_equal(getattr(blocked, name), getattr(whole, name))
+
+
+FIELDS = ("face", "bary", "point", "distance", "signed", "normal")
+
+
+def _assert_same(got, ref):
+    for name in FIELDS:
+        np.testing.assert_array_equal(getattr(got, name), getattr(ref, name), err_msg=name)
+
+
+def _probe_points(v, f, rng, n=600):
+    """Points on vertices, edges and faces (ties between triangles), just off and inside the
+    surface, and up to 10 sizes away."""
+    size = np.ptp(v, axis=0).max()
+    face = rng.integers(0, len(f), n)
+    on_face = np.einsum("nk,nkd->nd", rng.dirichlet([1, 1, 1], n), v[f[face]])
+    on_edge = 0.5 * (v[f[face, 0]] + v[f[face, 1]])
+    near = on_face + rng.normal(scale=0.02 * size, size=(n, 3))
+    far = v.mean(axis=0) + rng.normal(size=(n, 3)) * 10.0 ** rng.uniform(-1, 1, (n, 1)) * size
+    return np.concatenate([v[rng.integers(0, len(v), n)], on_edge, on_face, near, far])
+
+
+def test_query_is_the_reference_query_bit_for_bit():
+    """Screening the candidates by ``DistanceBounds`` changes nothing: closed and open meshes, a mesh
+    far from the origin, points on vertices and edges (exact ties, settled by ring order)."""
+    v, f, rng = _bumpy_sphere(5)
+    box = trimesh.creation.box().subdivide().subdivide()
+    box.update_faces(box.face_normals[:, 2] < 0.5)  # an open box: its top is a rim
+    box.remove_unreferenced_vertices()
+    meshes = [(v, f), (np.asarray(box.vertices), np.asarray(box.faces)), (v + 500.0, f)]
+    for vertices, faces in meshes:
+        mesh = ClosestPoint.build(vertices, faces)
+        points = _probe_points(vertices, faces, rng)
+        _assert_same(mesh.query(points), mesh.query_reference(points))
+
+
+def test_query_is_the_reference_query_on_degenerate_triangles():
+    """Collapsed and zero-area triangles (the screen leaves them to Ericson's test) and vertices that no
+    triangle uses, some points' k nearest among them (both then answer the reference's way)."""
+    v, f, rng = _bumpy_sphere(6)
+    f = f.copy()
+    f[:40, 2] = f[:40, 1]  # an edge twice
+    f[40:60, 1:] = f[40:60, :1]  # a point
+    v = v.copy()
+    v[f[60:90, 2]] = 0.5 * (v[f[60:90, 0]] + v[f[60:90, 1]])  # collinear corners
+    loose = v.mean(axis=0) + np.array([1.0, 0.0, 0.0]) + rng.normal(scale=1e-3, size=(6, 3))
+    v = np.concatenate([v, loose])
+    mesh = ClosestPoint.build(v, f)
+    points = np.concatenate([_probe_points(v, f, rng), loose + 1e-4])
+    _assert_same(mesh.query(points), mesh.query_reference(points))
+
+
+def test_distance_bounds_hold_ericsons_distance():
+    """lower <= |p - closest point|^2 <= upper, the closest point by ``closest_on_triangles``: random
+    triangles from fat to slivers, 1 cm from 1 km off the origin, points from on them to 1000 m away
+    (the bounds' rounding allowance is argued in ``DistanceBounds``)."""
+    rng = np.random.default_rng(7)
+    n = 60_000
+    origin = rng.normal(size=(n, 1, 3)) * 10.0 ** rng.integers(0, 4, (n, 1, 1))
+    edge = rng.normal(scale=0.01, size=(n, 2, 3))
+    fat = 10.0 ** rng.uniform(-9, 0, (n, 1))  # of the second edge across the first
+    edge[:, 1] = rng.uniform(-0.5, 1.5, (n, 1)) * edge[:, 0] + fat * edge[:, 1]
+    tri = np.concatenate([origin, origin + edge], axis=1)  # (n, 3, 3)
+    direction = rng.normal(size=(n, 3))
+    direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+    points = tri.mean(axis=1) + direction * 0.01 * 10.0 ** rng.uniform(-8, 5, (n, 1))
+    bounds = DistanceBounds.build(tri.reshape(-1, 3), np.arange(3 * n).reshape(n, 3))
+    lower, upper = bounds.squared_distance(points, np.arange(n), np.arange(n))
+    w = closest_on_triangles(points, tri[:, 0], tri[:, 1], tri[:, 2])
+    d2 = np.linalg.norm(points - np.einsum("mk,mkd->md", w, tri), axis=1) ** 2
+    assert np.all(lower <= d2) and np.all(d2 <= upper)
+    # Narrow enough to screen: a mesh of well-shaped triangles near the origin gets ~1e-7 of the scale.
+    shaped = np.flatnonzero((fat[:, 0] > 0.3) & (np.abs(origin[:, 0]).max(axis=1) < 10))
+    bounds = DistanceBounds.build(tri[shaped].reshape(-1, 3), np.arange(3 * len(shaped)).reshape(-1, 3))
+    lower, upper = bounds.squared_distance(points[shaped], np.arange(len(shaped)), np.arange(len(shaped)))
+    scale = d2[shaped] + np.einsum("nkd,nkd->n", edge[shaped], edge[shaped])
+    assert len(shaped) > 1000 and np.all(upper - lower <= 1e-5 * scale)
+
+
+def _open_box():
+    box = trimesh.creation.box(extents=(0.3, 0.2, 0.1))
+    keep = np.flatnonzero(box.face_normals[:, 2] < 0.5)  # no lid: a rim
+    return np.asarray(box.vertices, dtype=np.float64), np.asarray(box.faces[keep], dtype=np.int64)
+
+
+def test_lazy_pseudo_normals_are_the_built_ones_bit_for_bit():
+    for v, f in (_bumpy_sphere(3)[:2], _open_box()):
+        fn = face_normals(v, f)
+        full = PseudoNormals.build(v, f, fn)
+        lazy = LazyPseudoNormals.of(v, f, fn, MeshTopology.build(f, len(v)))
+        rng = np.random.default_rng(3)
+        # Piecemeal, repeats included, as the queries ask: then every vertex and edge.
+        for _ in range(3):
+            some = rng.integers(0, len(v), 7)
+            np.testing.assert_array_equal(lazy.vertex_at(some), full.vertex[some])
+            some = rng.integers(0, len(full.edge_keys), 7)
+            np.testing.assert_array_equal(lazy.edge_at(some), full.edge[some])
+        np.testing.assert_array_equal(lazy.vertex_at(np.arange(len(v))), full.vertex)
+        np.testing.assert_array_equal(lazy.edge_at(np.arange(len(full.edge_keys))), full.edge)
+        np.testing.assert_array_equal(lazy.edge_keys, full.edge_keys)
+        np.testing.assert_array_equal(lazy.edge_faces, full.edge_faces)
+
+
+def test_query_with_lazy_pseudo_normals_is_the_one_with_built_ones():
+    for v, f in (_bumpy_sphere(3)[:2], _open_box()):
+        mesh, built = ClosestPoint.build(v, f), ClosestPoint.build(v, f)
+        built.pseudo = PseudoNormals.build(built.vertices, built.faces, built.fn)
+        points = np.random.default_rng(4).normal(size=(400, 3)) * 0.1
+        got, ref = mesh.query(points), built.query(points)
+        for name in ("face", "bary", "point", "distance", "signed", "normal"):
+            np.testing.assert_array_equal(getattr(got, name), getattr(ref, name))
+        np.testing.assert_array_equal(mesh.on_boundary(got), built.on_boundary(ref))
+
+
+def test_kept_topology_is_a_fresh_one_and_kept_by_content():
+    v, f, _ = _bumpy_sphere(3)
+    kept = mesh_topology(f, len(v))
+    assert mesh_topology(f.copy().astype(np.int32), len(v)) is kept
+    fresh = MeshTopology.build(f.astype(np.int64), len(v))
+    names = ("ring", "corners", "edge_keys", "edge_sides", "edge_faces")
+    names += ("boundary_edges", "boundary_vertices")
+    for name in names:
+        np.testing.assert_array_equal(getattr(kept, name), getattr(fresh, name))
+    other = f[:, [0, 2, 1]]
+    assert mesh_topology(other, len(v)) is not kept
+
+
+def test_face_normals_are_the_reference_bit_for_bit():
+    rng = np.random.default_rng(5)
+    v = rng.normal(size=(500, 3)) * 10.0 ** rng.integers(-4, 3, size=(500, 1))
+    f = rng.integers(0, 500, size=(1000, 3))
+    f[:5, 1] = f[:5, 0]  # degenerate: zero normals
+    for normalize in (True, False):
+        np.testing.assert_array_equal(face_normals(v, f, normalize), face_normals_reference(v, f, normalize))

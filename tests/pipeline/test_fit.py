@@ -1,0 +1,252 @@
+"""Strain energy and the garment fit (service.pipeline.strain, service.pipeline.fit) on analytic fields."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from service.pipeline.fields import FieldValues
+from service.pipeline.fit import FitSettings, fit_garment, rows_of
+from service.pipeline.strain import RestShape, green_strain_norms, strain_energy, strain_energy_reference
+from service.pipeline.untangle import GAP_DELTA, untangle_with_jacobian
+from tests.meshes import grid_mesh
+
+
+def _sheet(n=6, z=0.0, size=0.1):
+    v, f = grid_mesh(n)
+    return v * [size, size, 0] + [0, 0, z], f
+
+
+def test_strain_gradient_matches_finite_differences():
+    v, f = _sheet()
+    rest = RestShape.build(v, f)
+    rng = np.random.default_rng(0)
+    x = v + rng.normal(scale=0.01, size=v.shape)
+    _, g = strain_energy(x, rest)
+    d = rng.normal(size=x.shape)
+    eps = 1e-6
+    fd = (strain_energy(x + eps * d, rest)[0] - strain_energy(x - eps * d, rest)[0]) / (2 * eps)
+    assert fd == pytest.approx(float(np.sum(g * d)), rel=1e-6)
+
+
+def test_strain_equals_its_reference_on_a_crumpled_garment_like_sheet():
+    # Irregular rest triangles (Dm^-1 full, not the grid's) and large stretch and shear.
+    rng = np.random.default_rng(1)
+    v, f = _sheet(9)
+    rest_v = v + rng.normal(scale=0.003, size=v.shape)
+    rest = RestShape.build(rest_v, f)
+    x = rest_v * [1.3, 0.8, 1] + rng.normal(scale=0.01, size=v.shape)
+    e, g = strain_energy(x, rest)
+    e_ref, g_ref = strain_energy_reference(x, rest)
+    assert e == pytest.approx(e_ref, rel=1e-12)
+    np.testing.assert_allclose(g, g_ref, rtol=1e-10, atol=1e-12 * np.abs(g_ref).max())
+    # The rest matrices are the inverses of the rest edge matrices in the triangles' own 2-D frames:
+    # Dm^-1 maps those edges to (1, 0) and (0, 1), so x = rest gives F^T F = I.
+    assert strain_energy(rest_v, rest)[0] == pytest.approx(0, abs=1e-20)
+    e1 = rest_v[f[:, 1]] - rest_v[f[:, 0]]
+    np.testing.assert_allclose(np.linalg.norm(e1, axis=1) * rest.dm_inv[:, 0, 0], 1, rtol=1e-12)
+    np.testing.assert_allclose(rest.dm_inv[:, 1, 0], 0)
+
+
+def test_strain_is_zero_at_rest_and_under_rigid_motion_and_matches_a_stretch():
+    v, f = _sheet()
+    rest = RestShape.build(v, f)
+    c, s = np.cos(0.7), np.sin(0.7)
+    rot = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]]) @ np.array([[1, 0, 0], [0, c, -s], [0, s, c]])
+    for x in (v, v @ rot.T + [0.3, -1, 2]):
+        e, g = strain_energy(x, rest)
+        # round-off: coordinates ~1 m over edges of 1.7 cm leave E ~ 1e-14 and gradients ~ 1e-12
+        assert e == pytest.approx(0, abs=1e-20) and np.abs(g).max() < 1e-10
+    # Uniaxial stretch by 1 + s along x: E = diag((1+s)^2 - 1, 0) / 2 on every triangle.
+    stretched = v * [1.1, 1, 1]
+    norms = green_strain_norms(stretched, rest)
+    np.testing.assert_allclose(norms, 0.5 * (1.1**2 - 1), rtol=1e-12)
+
+
+def planes(offsets: list[float]):
+    """Layer k's fields: f = z - offsets[k] (flat surfaces facing +z), always active."""
+
+    def fields(k, x, gradient):
+        f = x[:, 2] - offsets[k]
+        h = np.full(len(x), -1.0)
+        if not gradient:
+            return FieldValues(f, h, None, None)
+        return FieldValues(f, h, np.tile([0.0, 0, 1], (len(x), 1)), np.zeros_like(x))
+
+    return fields
+
+
+reference = rows_of(untangle_with_jacobian)
+
+
+def test_fit_pushes_a_garment_out_of_the_body_to_the_gap():
+    v, f = _sheet(z=0.002)  # 2 mm outside the body surface z = 0: inside the 4 mm gap
+    res = fit_garment(v, f, 1, 2, planes([0.0, 0.002]), reference)
+    np.testing.assert_allclose(res.vertices[:, 2], GAP_DELTA, atol=1e-6)
+    np.testing.assert_allclose(res.vertices[:, :2], v[:, :2], atol=1e-9)
+    assert res.residual_before == pytest.approx(0.002) and res.residual_after < 1e-6
+
+
+def test_fit_orders_two_crossing_garments_delta_apart():
+    # Garment 1 (inner) at z = 10 mm, garment 2 (outer) at 8 mm: crossed. Each fits alone against
+    # the others' fields; the exact operator splits the 6 mm violation evenly: 7 mm and 11 mm.
+    offsets = [0.0, 0.010, 0.008]
+    inner = fit_garment(*_sheet(z=0.010), 1, 3, planes(offsets), reference)
+    outer = fit_garment(*_sheet(z=0.008), 2, 3, planes(offsets), reference)
+    np.testing.assert_allclose(inner.vertices[:, 2], 0.007, atol=1e-6)
+    np.testing.assert_allclose(outer.vertices[:, 2], 0.011, atol=1e-6)
+    assert outer.vertices[:, 2].min() - inner.vertices[:, 2].max() == pytest.approx(GAP_DELTA, abs=2e-6)
+
+
+def test_untangled_garment_is_left_alone():
+    v, f = _sheet(z=0.02)
+    res = fit_garment(v, f, 1, 2, planes([0.0, 0.02]), reference, FitSettings())
+    assert res.linearisations == 0 and not res.optimised.any()
+    np.testing.assert_array_equal(res.vertices, v)
+
+
+def test_only_conflicting_vertices_and_their_rings_move():
+    # The body bulges 18 mm up under one corner of a sheet 20 mm above it: only there is the sheet
+    # closer than the 4 mm gap.
+    v, f = _sheet(n=10, z=0.02)
+    flat = planes([0.0, 0.02])
+
+    def bump(x):
+        return 0.018 * np.exp(-(x[:, 0] ** 2 + x[:, 1] ** 2) / 0.02**2)
+
+    def fields(k, x, gradient):
+        out = flat(k, x, gradient)
+        if k != 0:
+            return out
+        b = bump(x)
+        grad = None
+        if gradient:
+            grad = out.grad_f.copy()
+            grad[:, :2] = 2 * b[:, None] * x[:, :2] / 0.02**2
+        return FieldValues(out.f - b, out.h, grad, out.grad_h)
+
+    res = fit_garment(v, f, 1, 2, fields, reference, FitSettings())
+    assert 0 < res.optimised.sum() < 30
+    np.testing.assert_array_equal(res.vertices[~res.optimised], v[~res.optimised])
+    clearance = res.vertices[:, 2] - bump(res.vertices)
+    assert clearance.min() > GAP_DELTA - FitSettings().conflict_tol
+    assert res.residual_after <= FitSettings().conflict_tol
+
+
+def test_a_nan_from_a_field_leaves_the_garment_finite_and_flags_the_fit():
+    v, f = _sheet(z=0.002)  # inside the gap: the fit has work to do
+    flat = planes([0.0, 0.002])
+
+    def broken(k, x, gradient):
+        out = flat(k, x, gradient)
+        if k == 0:  # the body's network answers NaN for half of the points
+            nan = np.where(np.arange(len(x)) % 2 == 0, np.nan, 0.0)
+            grad = None if out.grad_f is None else out.grad_f + nan[:, None]
+            return FieldValues(out.f + nan, out.h, grad, out.grad_h)
+        return out
+
+    res = fit_garment(v, f, 1, 2, broken, reference)
+    assert np.all(np.isfinite(res.vertices))
+    assert not res.ok  # flagged: make_outfit then serves the explicit mesh and names it in "fallback"
+
+
+def test_degenerate_triangles_do_not_break_the_fit():
+    v, f = _sheet(z=0.002)
+    v = v.copy()
+    v[f[0, 1]] = v[f[0, 0]]  # one triangle collapses to a segment: no rest frame, no strain term
+    res = fit_garment(v, f, 1, 2, planes([0.0, 0.002]), reference)
+    assert res.ok and np.all(np.isfinite(res.vertices))
+    np.testing.assert_allclose(res.vertices[:, 2], GAP_DELTA, atol=1e-6)
+
+
+def test_compact_strain_equals_the_full_mesh_strain_on_its_vertices():
+    v, f = _sheet(n=8)
+    rng = np.random.default_rng(1)
+    x = v + rng.normal(scale=0.005, size=v.shape)
+    part = RestShape.build(v, f).subset(np.arange(len(f)) % 3 == 0)
+    keep = np.array([0, len(v) - 1])  # vertices of no chosen triangle still get a slot
+    used, local = part.compact(keep)
+    assert set(keep) <= set(used)
+    e_full, g_full = strain_energy(x, part)
+    e_local, g_local = strain_energy(x[used], local)
+    assert e_local == pytest.approx(e_full, rel=1e-12)
+    np.testing.assert_allclose(g_local, g_full[used], rtol=1e-12, atol=1e-15)
+    assert np.all(np.delete(g_full, used, axis=0) == 0)
+
+
+def test_far_layers_are_never_asked_for_gradients_and_do_not_change_the_fit():
+    # A third layer 0.5 m away from the sheet takes no part: its gradient graph is never run, and the
+    # fit is the one of the sheet against the body alone.
+    v, f = _sheet(z=0.002)
+    asked = []
+    flat3, flat2 = planes([0.0, 0.002, 0.5]), planes([0.0, 0.002])
+
+    def fields(k, x, gradient):
+        if gradient:
+            asked.append((k, len(x)))
+        return flat3(k, x, gradient)
+
+    with_far = fit_garment(v, f, 1, 3, fields, reference)
+    alone = fit_garment(v, f, 1, 2, flat2, reference)
+    assert asked and all(k != 2 for k, _ in asked)
+    np.testing.assert_allclose(with_far.vertices, alone.vertices, atol=1e-12)
+
+
+def test_the_values_a_fit_returns_are_the_fields_at_its_vertices():
+    # The squeeze and the repair reuse them instead of evaluating the networks again.
+    v, f = _sheet(n=8, z=0.009)
+    fields = planes([0.0, 0.010, 0.008])
+    res = fit_garment(v, f, 2, 3, fields, reference)
+    assert res.ok and res.optimised.any()
+    for k in range(3):
+        now = fields(k, res.vertices, False)
+        np.testing.assert_allclose(res.values[0][:, k], now.f, atol=1e-15)
+        np.testing.assert_array_equal(res.values[1][:, k], now.h)
+
+
+def test_kept_adjacency_equals_a_fresh_one():
+    from service.pipeline.fit import vertex_neighbours, vertex_neighbours_reference
+
+    _, f = grid_mesh(6)
+    n = int(f.max()) + 1
+    first, again = vertex_neighbours(f, n), vertex_neighbours(f.copy(), n)
+    assert again is first  # same faces by content: the kept matrix
+    assert (first != vertex_neighbours_reference(f, n)).nnz == 0
+    other = f[:, ::-1].copy()  # other faces (orientation flipped): its own entry, same edges
+    assert vertex_neighbours(other, n) is not first
+    assert vertex_neighbours(f, n + 1).shape == (n + 1, n + 1)
+
+
+def test_rows_of_slices_the_full_jacobian():
+    rng = np.random.default_rng(4)
+    f, h = rng.normal(scale=0.01, size=(50, 3)), -np.ones((50, 3))
+    full = untangle_with_jacobian(f, h)[1]
+    for k in range(3):
+        values, row = reference(f, h, True, row=k)
+        np.testing.assert_array_equal(row, full[:, k : k + 1])
+        np.testing.assert_array_equal(values, untangle_with_jacobian(f, h)[0])
+    assert reference(f, h, False, row=1)[1] is None and reference(f, h, True)[1].shape == (50, 3, 6)
+
+
+def test_fit_through_the_neural_row_graph_equals_the_full_jacobian_fit():
+    """The fit asks the neural operator for its garment's row of the Jacobian only: the same fit as
+    with the whole Jacobian, to float32 rounding (the rows differ by < 1e-3 where entries reach 1e3)."""
+    pytest.importorskip("onnxruntime")
+    from service.pipeline.untangle_onnx import NeuralUntangler
+
+    neural = NeuralUntangler(threads=1)
+    calls = []
+
+    def by_row(f_star, h_star, jacobian, row=None):
+        calls.append(row)
+        out = neural(f_star, h_star, jacobian, row=row)
+        return out.f, out.jacobian
+
+    full = rows_of(lambda f_star, h_star, jacobian: tuple(neural(f_star, h_star, jacobian)))
+    fields = planes([0.0, 0.010, 0.008])
+    for layer, z in ((1, 0.010), (2, 0.008)):
+        v, f = _sheet(n=8, z=z)
+        ours, theirs = fit_garment(v, f, layer, 3, fields, by_row), fit_garment(v, f, layer, 3, fields, full)
+        assert ours.ok and ours.linearisations == 1 and layer in calls
+        np.testing.assert_array_equal(ours.optimised, theirs.optimised)
+        np.testing.assert_allclose(ours.vertices, theirs.vertices, rtol=0, atol=1e-7)

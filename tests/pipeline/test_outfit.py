@@ -1,0 +1,141 @@
+"""A small outfit end to end on the committed models: the end-to-end issue's measures, the CLI, GLB."""
+
+from __future__ import annotations
+
+import io
+import json
+
+import numpy as np
+import pytest
+import trimesh
+
+from service.cli import main
+from service.pipeline.outfit import OutfitModels, make_outfit
+from training.drape.dataset import sample_betas
+
+pytest.importorskip("onnxruntime")
+
+
+@pytest.fixture(scope="module")
+def models():
+    return OutfitModels.load()
+
+
+@pytest.fixture(scope="module")
+def held_out_beta():
+    return sample_betas(2, 3)[1]  # the outfit benchmark's body seed: used by no training
+
+
+def _tangle(report: dict, when: str) -> tuple[int, float]:
+    """(intersecting triangle pairs over all layer pairs, largest penetrating share of a garment)."""
+    return sum(report[f"intersections_{when}"].values()), max(report[f"penetration_{when}"].values())
+
+
+@pytest.mark.parametrize("untangler", ["reference", "neural"])
+def test_tshirt_under_jacket_untangles(models, held_out_beta, untangler):
+    r = make_outfit(models, ["tshirt", "jacket"], held_out_beta, untangler=untangler).report
+    pairs_before, pen_before = _tangle(r, "before")
+    _, pen_fit = _tangle(r, "fit")
+    pairs_after, pen_after = _tangle(r, "after")
+    # The explicit models alone tangle (crossing triangle pairs, jacket vertices inside the T-shirt)...
+    assert pairs_before > 50 and pen_before > 0.001
+    # ...the field fit moves most penetrating vertices out (it does not always lower the count of crossing
+    # triangle pairs: the learned fields are mm off the meshes, and new small crossings appear where the
+    # vertices it moves meet the ones it keeps; README, Outfits)...
+    assert pen_fit < 0.3 * pen_before, (r["penetration_before"], r["penetration_fit"])
+    # ...and the exact repair meets the end-to-end issue's targets: no crossing, <= 0.1 % penetrating.
+    assert pairs_after == 0, r["intersections_after"]
+    assert pen_after <= 0.001, r["penetration_after"]
+    assert all(v["crossing_pairs"] == 0 for v in r["repair"].values())
+    assert r["collision_free"] is True and r["crossing_pairs"] == 0
+    assert r["fallback"] == []
+    # Only the tangled regions move: the mean vertex moves by millimetres.
+    assert max(r["mean_displacement_mm"].values()) < 5
+
+
+def test_tshirt_tucked_into_pants_untangles(models, held_out_beta):
+    # Paper Figure 3's tucked order on the short, heavy held-out body: the T-shirt's hem hangs 2-4 cm
+    # outside the pants before; the squeeze presses it in under them and the repair leaves no crossing.
+    r = make_outfit(models, ["tshirt", "pants"], held_out_beta).report
+    pairs_before, _ = _tangle(r, "before")
+    pairs_after, pen_after = _tangle(r, "after")
+    assert pairs_before > 50
+    assert pairs_after == 0, r["intersections_after"]
+    assert pen_after <= 0.001, r["penetration_after"]
+
+
+def test_bad_garments_are_refused(models, held_out_beta):
+    for ids, match in ((["tshirt", "tshirt"], "at most once"), (["cape"], "unknown"), ([], "between")):
+        with pytest.raises(ValueError, match=match):
+            make_outfit(models, ids, held_out_beta)
+
+
+def test_cli_writes_a_glb_and_prints_the_report(tmp_path, capsys):
+    out = tmp_path / "o.glb"
+    code = main(["outfit", "--garments", "tank_top,tshirt", "--gender", "1", "--height-cm", "165",
+                 "--weight-kg", "60", "-o", str(out)])  # fmt: skip
+    assert code == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["garments"] == ["tank_top", "tshirt"]
+    scene = trimesh.load(io.BytesIO(out.read_bytes()), file_type="glb", process=False)
+    assert sorted(scene.graph.nodes_geometry) == ["body", "tank_top", "tshirt"]
+    assert all(np.isfinite(g.vertices).all() for g in scene.geometry.values())
+
+
+def test_cli_names_the_bad_field(tmp_path, capsys):
+    code = main(["outfit", "--garments", "tshirt", "--height-cm", "400", "-o", str(tmp_path / "x.glb")])
+    assert code == 2
+    assert "height_cm" in capsys.readouterr().err
+
+
+def test_serving_path_imports_no_torch():
+    import subprocess
+    import sys
+
+    modules = (
+        "service.server.app, service.cli, service.pipeline.outfit, service.pipeline.fields, "
+        "service.pipeline.fit, service.pipeline.gltf"
+    )
+    code = f"import sys, {modules}; sys.exit('torch' in sys.modules or 'training' in sys.modules)"
+    assert subprocess.run([sys.executable, "-c", code], check=False).returncode == 0
+
+
+def test_a_field_answering_nan_gives_the_explicit_mesh_and_a_flag(models, held_out_beta, monkeypatch):
+    from service.pipeline.fields import FieldValues
+
+    real = models.fields.__class__.__call__
+
+    def nan_for_tshirt(self, field_id, x, beta, gradient=False):
+        out = real(self, field_id, x, beta, gradient)
+        if field_id != "tshirt":
+            return out
+        return FieldValues(*(None if a is None else np.full_like(a, np.nan) for a in out))
+
+    monkeypatch.setattr(models.fields.__class__, "__call__", nan_for_tshirt)
+    outfit = make_outfit(models, ["tshirt"], held_out_beta, measure=False)
+    assert outfit.report["fallback"] == ["tshirt"]
+    assert all(np.all(np.isfinite(v)) for _, v, _ in outfit.garments)
+    json.dumps(outfit.report, allow_nan=False)  # what an HTTP answer needs
+
+
+def test_side_by_side_fits_equal_one_after_the_other(models, held_out_beta):
+    # make_outfit fits the garments on two threads: each fit depends only on its own garment and the
+    # fields, so the result must be the sequential fit's, bit for bit.
+    from service.pipeline.fields import BODY
+    from service.pipeline.fit import fit_garment
+    from service.pipeline.outfit import DEFAULT_FIT
+
+    ids = ["pants", "tshirt", "jacket"]
+    out = make_outfit(models, ids, held_out_beta, measure=False, repair=False)
+    layer_ids = [BODY, *ids]
+
+    def layer_fields(k, x, gradient):
+        if k == 0:
+            return models.body_field(x, gradient)
+        return models.fields(layer_ids[k], x, held_out_beta, gradient)
+
+    op = models.untangler("neural")
+    for i, (gid, world, faces) in enumerate(out.garments):
+        x0 = models.explicit[gid].canonical(held_out_beta)
+        fitted = fit_garment(x0, faces, i + 1, len(layer_ids), layer_fields, op, DEFAULT_FIT).vertices
+        assert np.array_equal(world, models.space.to_body(fitted, out.body_vertices)), gid

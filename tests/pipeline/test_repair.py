@@ -1,0 +1,196 @@
+"""The exact collision repair (service.pipeline.repair) on hand-made layers with known answers."""
+
+from __future__ import annotations
+
+import numpy as np
+import trimesh
+
+from service.geometry.closest import ClosestPoint, KeptQueries
+from service.geometry.intersections import intersecting_pairs
+from service.pipeline.repair import (
+    Inner,
+    RepairSettings,
+    _clear_of,
+    _clear_of_reference,
+    _faces_around,
+    repair_layer,
+)
+from tests.meshes import grid_mesh
+
+
+def _sheet(n: int, size: float, z):
+    v, f = grid_mesh(n)
+    v = (v - [0.5, 0.5, 0]) * [size, size, 0]
+    v[:, 2] = z(v)
+    return v, f
+
+
+def _everywhere(n: int) -> np.ndarray:
+    return np.ones(n, dtype=bool)
+
+
+def test_a_sheet_crossing_an_inner_sheet_is_lifted_above_it_and_only_there():
+    inner_v, inner_f = _sheet(20, 0.4, lambda v: 0.0 * v[:, 0])
+    # The outer sheet lies 1 cm above but dips 6 mm through the inner one in a 3 cm wide dent.
+    outer_v, outer_f = _sheet(
+        24, 0.36, lambda v: 0.01 - 0.016 * np.exp(-(v[:, 0] ** 2 + v[:, 1] ** 2) / 0.03**2)
+    )
+    assert len(intersecting_pairs(outer_v, outer_f, inner_v, inner_f)) > 0
+    n = len(outer_v)
+    inner = [Inner(ClosestPoint.build(inner_v, inner_f), False, _everywhere(n), _everywhere(n))]
+    settings = RepairSettings()
+    r = repair_layer(outer_v, outer_f, inner, settings)
+    assert r.crossing_pairs == 0
+    assert len(intersecting_pairs(r.vertices, outer_f, inner_v, inner_f)) == 0
+    assert r.vertices[:, 2].min() >= settings.margin - 1e-9
+    # Vertices far from the dent (over 8 cm from its centre) never move.
+    far = np.linalg.norm(outer_v[:, :2], axis=1) > 0.08
+    np.testing.assert_array_equal(r.vertices[far], outer_v[far])
+    assert r.moved.any() and not r.moved[far].any()
+
+
+def test_an_uncovered_inner_layer_leaves_the_vertices_below_it_alone():
+    inner_v, inner_f = _sheet(10, 0.4, lambda v: 0.0 * v[:, 0])
+    outer_v, outer_f = _sheet(8, 0.1, lambda v: -0.01 + 0.0 * v[:, 0])  # 1 cm below, no crossing
+    n = len(outer_v)
+    covered = Inner(ClosestPoint.build(inner_v, inner_f), False, _everywhere(n), _everywhere(n))
+    r = repair_layer(outer_v, outer_f, [covered])
+    assert r.vertices[:, 2].min() > 0  # on the wrong side of a covering layer: moved out
+    open_layer = Inner(covered.mesh, False, _everywhere(n), np.zeros(n, dtype=bool))
+    r = repair_layer(outer_v, outer_f, [open_layer])
+    np.testing.assert_array_equal(r.vertices, outer_v)  # beyond its opening: nothing to do
+
+
+def test_nothing_ends_inside_a_closed_body():
+    body = trimesh.creation.icosphere(subdivisions=4, radius=0.1)
+    # A sheet cutting 3 cm deep into the sphere of radius 10 cm.
+    v, f = _sheet(30, 0.3, lambda v: 0.07 + 0.0 * v[:, 0])
+    n = len(v)
+    inner = [Inner(ClosestPoint.build(body.vertices, body.faces), True, _everywhere(n), _everywhere(n))]
+    r = repair_layer(v, f, inner, RepairSettings(rounds=10))
+    assert r.crossing_pairs == 0
+    assert np.linalg.norm(r.vertices, axis=1).min() >= 0.1 + RepairSettings().margin - 2e-4
+    assert len(intersecting_pairs(r.vertices, f, body.vertices, body.faces)) == 0
+
+
+def test_degenerate_triangles_stay_finite_through_the_repair():
+    inner_v, inner_f = _sheet(20, 0.4, lambda v: 0.0 * v[:, 0])
+    outer_v, outer_f = _sheet(12, 0.2, lambda v: -0.003 + 0.0 * v[:, 0])  # 3 mm below: all inside
+    outer_v[outer_f[5, 1]] = outer_v[outer_f[5, 0]]  # a zero-area triangle
+    n = len(outer_v)
+    inner = [Inner(ClosestPoint.build(inner_v, inner_f), False, _everywhere(n), _everywhere(n))]
+    r = repair_layer(outer_v, outer_f, inner)
+    assert np.all(np.isfinite(r.vertices))
+    assert r.crossing_pairs == 0 and r.inside == 0
+
+
+def test_kept_queries_answer_as_fresh_ones_after_some_vertices_move():
+    inner_v, inner_f = _sheet(20, 0.4, lambda v: 0.01 * np.sin(20 * v[:, 0]))
+    outer_v, _ = _sheet(24, 0.36, lambda v: 0.005 + 0.0 * v[:, 0])
+    n = len(outer_v)
+    near = np.arange(n) % 3 > 0
+    layer = Inner(ClosestPoint.build(inner_v, inner_f), False, near, _everywhere(n))
+    kept = KeptQueries(layer.mesh, n)
+    ask = np.flatnonzero(near)
+    kept.at(outer_v, ask)
+    moved = outer_v.copy()
+    moved[::5] += [0.0, 0.0, 0.003]
+    signed, point, normal, _ = kept.at(moved, ask)
+    fresh = layer.mesh.query(moved[near])
+    np.testing.assert_array_equal(signed, fresh.signed)
+    np.testing.assert_array_equal(point, fresh.point)
+    np.testing.assert_array_equal(normal, fresh.normal)
+
+
+def test_diffusion_on_the_free_rows_is_the_whole_product_bit_for_bit():
+    from service.pipeline.fit import dilate, vertex_neighbours
+    from service.pipeline.repair import diffuse
+
+    v, f = _sheet(15, 0.3, lambda v: 0.0 * v[:, 0])
+    adjacency = vertex_neighbours(f, len(v))
+    rng = np.random.default_rng(0)
+    held = rng.random(len(v)) < 0.05
+    u = np.where(held[:, None], rng.normal(size=v.shape), 0.0)
+    region = dilate(held, adjacency, 2)
+    # The whole-matrix diffusion the row-restricted one replaces.
+    degree = np.asarray(adjacency.sum(axis=1)).ravel()
+    expected = u
+    for _ in range(8):
+        mean = (adjacency @ expected) / np.maximum(degree, 1)[:, None]
+        expected = np.where((region & ~held)[:, None], mean, expected)
+    np.testing.assert_array_equal(diffuse(u, held, region, adjacency, 8), expected)
+
+
+def test_a_query_subset_holding_every_violation_repairs_as_all_near_vertices_do():
+    inner_v, inner_f = _sheet(20, 0.4, lambda v: 0.0 * v[:, 0])
+    outer_v, outer_f = _sheet(
+        24, 0.36, lambda v: 0.01 - 0.016 * np.exp(-(v[:, 0] ** 2 + v[:, 1] ** 2) / 0.03**2)
+    )
+    n = len(outer_v)
+    mesh = ClosestPoint.build(inner_v, inner_f)
+    full = repair_layer(outer_v, outer_f, [Inner(mesh, False, _everywhere(n), _everywhere(n))])
+    dent = outer_v[:, 2] < 0.008  # every vertex the dent brings within the margin, and more
+    part = repair_layer(outer_v, outer_f, [Inner(mesh, False, _everywhere(n), _everywhere(n), dent)])
+    assert full.crossing_pairs == part.crossing_pairs == 0
+    np.testing.assert_array_equal(part.vertices, full.vertices)
+
+
+def test_vertices_left_out_of_the_queries_are_asked_once_their_triangles_cross():
+    inner_v, inner_f = _sheet(20, 0.4, lambda v: 0.0 * v[:, 0])
+    outer_v, outer_f = _sheet(
+        24, 0.36, lambda v: 0.01 - 0.016 * np.exp(-(v[:, 0] ** 2 + v[:, 1] ** 2) / 0.03**2)
+    )
+    n = len(outer_v)
+    nothing = np.zeros(n, dtype=bool)  # a wrong hint: no vertex asked at first
+    layer = Inner(ClosestPoint.build(inner_v, inner_f), False, _everywhere(n), _everywhere(n), nothing)
+    r = repair_layer(outer_v, outer_f, [layer])
+    assert r.crossing_pairs == 0
+    assert len(intersecting_pairs(r.vertices, outer_f, inner_v, inner_f)) == 0
+
+
+def test_pruning_triangles_clear_of_the_inner_layer_changes_nothing(monkeypatch):
+    import service.pipeline.repair as repair
+
+    inner_v, inner_f = _sheet(20, 0.4, lambda v: 0.01 * np.sin(25 * v[:, 0]))
+    outer_v, outer_f = _sheet(
+        24, 0.36, lambda v: 0.012 - 0.02 * np.exp(-(v[:, 0] ** 2 + v[:, 1] ** 2) / 0.04**2)
+    )
+    n = len(outer_v)
+    layer = [Inner(ClosestPoint.build(inner_v, inner_f), False, _everywhere(n), _everywhere(n))]
+    pruned = repair_layer(outer_v, outer_f, layer)
+    cleared = repair._clear_of(outer_v, outer_f, _asked(layer[0], outer_v))
+    assert 0 < cleared.sum() < len(outer_f)  # the case prunes some triangles and keeps others
+    monkeypatch.setattr(repair, "_clear_of", lambda x, faces, kept: np.zeros(len(faces), dtype=bool))
+    full = repair_layer(outer_v, outer_f, layer)
+    assert pruned.crossing_pairs == full.crossing_pairs and pruned.rounds == full.rounds
+    np.testing.assert_array_equal(pruned.vertices, full.vertices)
+
+
+def _asked(layer: Inner, x: np.ndarray) -> KeptQueries:
+    kept = KeptQueries(layer.mesh, len(x))
+    kept.at(x, np.arange(len(x)))
+    return kept
+
+
+def test_clear_of_is_the_reference_bit_for_bit():
+    inner_v, inner_f = _sheet(12, 0.4, lambda v: 0.0 * v[:, 0])
+    outer_v, outer_f = _sheet(16, 0.36, lambda v: 0.004 + 0.3 * (v[:, 0] + 0.18))
+    kept = KeptQueries(ClosestPoint.build(inner_v, inner_f), len(outer_v))
+    rng = np.random.default_rng(6)
+    kept.at(outer_v, np.flatnonzero(rng.random(len(outer_v)) < 0.6))  # some never asked
+    x = outer_v + rng.normal(size=outer_v.shape) * 0.002
+    some = outer_f[rng.random(len(outer_f)) < 0.5]
+    got = _clear_of(x, some, kept)
+    np.testing.assert_array_equal(got, _clear_of_reference(x, some, kept))
+    assert got.any() and not got.all()
+
+
+def test_faces_around_are_those_with_a_vertex_in_the_grown_box():
+    inner_v, inner_f = _sheet(12, 0.4, lambda v: 0.0 * v[:, 0])
+    mesh = ClosestPoint.build(inner_v, inner_f)
+    corners = np.array([[-0.05, -0.02, 0.01], [0.03, 0.04, 0.0]])
+    lo, hi = corners.min(axis=0) - 0.01, corners.max(axis=0) + 0.01
+    inside = np.all((inner_v >= lo) & (inner_v <= hi), axis=1)
+    got = _faces_around(mesh, corners, 0.01)
+    np.testing.assert_array_equal(got, np.flatnonzero(inside[inner_f].any(axis=1)))
+    assert 0 < len(got) < len(inner_f)

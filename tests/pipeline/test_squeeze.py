@@ -1,0 +1,73 @@
+"""The squeeze (service.pipeline.squeeze) on hand-made layers with known answers."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from service.geometry.closest import ClosestPoint
+from service.geometry.intersections import intersecting_pairs
+from service.pipeline.squeeze import Outer, SqueezeSettings, squeeze_layer
+from tests.meshes import grid_mesh
+
+
+def _sheet(n: int, size: float, z: float):
+    v, f = grid_mesh(n)
+    return (v - [0.5, 0.5, 0]) * [size, size, 0] + [0, 0, z], f
+
+
+def _squeeze(inner_z: float, outer_z: float, settings: SqueezeSettings | None = None):
+    body = ClosestPoint.build(*_sheet(30, 0.5, 0.0))
+    outer = ClosestPoint.build(*_sheet(24, 0.4, outer_z))
+    v, f = _sheet(20, 0.3, inner_z)
+    covered = v[:, 0] < 0  # the outer layer covers the half x < 0 (a waistband along x = 0)
+    near = np.ones(len(v), dtype=bool)
+    settings = settings or SqueezeSettings()
+    return v, f, outer, squeeze_layer(v, f, [Outer(outer, near, covered)], body, settings.margin, settings)
+
+
+def test_a_loose_inner_layer_is_pressed_under_the_outer_one_where_it_covers_it():
+    # The inner sheet hangs 1 cm outside the outer one (2 cm off the body, the outer at 1 cm).
+    settings = SqueezeSettings()
+    v, f, outer, r = _squeeze(0.02, 0.01, settings)
+    assert r.outside == 0
+    x = r.vertices
+    covered = v[:, 0] < 0
+    # Under the outer layer by the margin (to the bisection's resolution), never onto the body.
+    assert np.all(x[covered, 2] <= 0.01 - 0.9 * settings.margin)
+    assert np.all(x[:, 2] >= settings.margin - 1e-9)
+    # Straight towards the body: no sideways motion of the pressed vertices.
+    np.testing.assert_allclose(x[covered, :2], v[covered, :2], atol=1e-12)
+    # Beyond the diffusion rings the uncovered half never moves.
+    far = v[:, 0] > 0.1
+    np.testing.assert_array_equal(x[far], v[far])
+    assert r.moved[covered].all() and not r.moved[far].any()
+    # The pressed part no longer crosses the outer layer where it covers it.
+    inside = np.flatnonzero(np.all(x[f][:, :, 0] < -0.05, axis=1))
+    assert len(intersecting_pairs(x, f[inside], outer.vertices, outer.faces)) == 0
+
+
+def test_an_inner_layer_already_inside_is_left_alone():
+    v, _, _, r = _squeeze(0.005, 0.01)
+    assert r.outside == 0 and not r.moved.any()
+    np.testing.assert_array_equal(r.vertices, v)
+
+
+def test_an_outer_layer_on_the_skin_leaves_the_inner_one_at_the_margin_for_the_repair():
+    # No room under an outer layer 1 mm off the body: the inner one goes to the body margin and stays
+    # outside it, counted, for the repair to lift the outer layer over it.
+    settings = SqueezeSettings()
+    v, _, _, r = _squeeze(0.02, 0.001, settings)
+    covered = v[:, 0] < -0.03
+    np.testing.assert_allclose(r.vertices[covered, 2], settings.margin, atol=1e-9)
+    assert r.outside > 0
+
+
+def test_the_floor_keeps_room_for_the_garments_under_the_squeezed_one():
+    # The third garment of a stack stops 6 mm off the body, where an outer layer on the skin leaves it.
+    settings = SqueezeSettings()
+    body = ClosestPoint.build(*_sheet(30, 0.5, 0.0))
+    outer = ClosestPoint.build(*_sheet(24, 0.4, 0.001))
+    v, f = _sheet(20, 0.3, 0.02)
+    everywhere = np.ones(len(v), dtype=bool)
+    r = squeeze_layer(v, f, [Outer(outer, everywhere, everywhere)], body, 3 * settings.margin, settings)
+    np.testing.assert_allclose(r.vertices[:, 2], 3 * settings.margin, atol=1e-9)

@@ -1,0 +1,280 @@
+"""POST /v1/outfits and GET /v1/outfits/{id}.glb at the HTTP edge (fake engine, tiny catalog):
+content negotiation, cache, validation messages, size limit, overload and deadlines."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import logging
+import time
+from pathlib import Path
+
+import httpx
+import pytest
+from fastapi.testclient import TestClient
+
+from service.pipeline.catalog import load_catalog
+from service.server.app import create_app
+from service.server.logs import JsonFormatter
+from service.server.settings import Settings
+from tests.service_tools import FakeEngine, live_server
+
+GLB = "model/gltf-binary"
+TINY = {"garments": ["pants", "tshirt"], "body": {"gender": 0.0, "height_cm": 180, "weight_kg": 80}}
+
+
+def make_app(models_dir: Path, delay: float = 0.0, crossings: int = 0, **overrides):
+    values = dict(models_dir=models_dir, verify_models=False, configure_logging=False,
+                  self_test_garments=[], self_test_untangle=False)  # fmt: skip
+    engine = {}
+
+    def factory(settings: Settings) -> FakeEngine:
+        engine["it"] = FakeEngine(load_catalog(settings.garments_dir()), delay=delay, crossings=crossings)
+        return engine["it"]
+
+    app = create_app(Settings(**(values | overrides)), factory)
+    return app, engine
+
+
+@pytest.fixture
+def app_and_engine(fake_models_dir: Path):
+    app, engine = make_app(fake_models_dir)
+    with TestClient(app) as client:
+        assert app.state.tryon.wait_loaded(10)
+        yield client, engine
+
+
+@pytest.fixture
+def client(app_and_engine) -> TestClient:
+    return app_and_engine[0]
+
+
+def test_post_answers_json_with_a_glb_url(app_and_engine):
+    client, engine = app_and_engine
+    response = client.post("/v1/outfits", json=TINY)
+    assert response.status_code == 200
+    body = response.json()
+    assert set(body) == {"id", "glb_url", "cached", "report"}
+    assert len(body["id"]) == 32 and body["glb_url"] == f"/v1/outfits/{body['id']}.glb"
+    assert body["cached"] is False and body["report"]["garments"] == ["pants", "tshirt"]
+    glb = client.get(body["glb_url"])
+    assert glb.status_code == 200 and glb.headers["content-type"] == GLB
+    assert glb.content[:4] == b"glTF" and glb.headers["etag"] == f'"{body["id"]}"'
+    again = client.post("/v1/outfits", json=TINY).json()
+    assert again["id"] == body["id"] and again["cached"] is True
+    assert engine["it"].calls == 1
+    assert 'ulnef_outfit_cache_total{result="hit"} 2.0' in client.get("/metrics").text
+
+
+def test_an_outfit_left_with_crossings_says_so_and_is_counted(fake_models_dir: Path):
+    app, _ = make_app(fake_models_dir, crossings=3)
+    with TestClient(app) as client:
+        assert app.state.tryon.wait_loaded(10)
+        report = client.post("/v1/outfits", json=TINY).json()["report"]
+        assert report["collision_free"] is False and report["crossing_pairs"] == 3
+        assert "ulnef_outfit_with_crossings_total 1.0" in client.get("/metrics").text
+        client.post("/v1/outfits", json=TINY)  # from the cache: counted once, when computed
+        assert "ulnef_outfit_with_crossings_total 1.0" in client.get("/metrics").text
+
+
+def test_post_answers_the_glb_itself_for_accept_glb(client: TestClient):
+    response = client.post("/v1/outfits", json=TINY, headers={"Accept": GLB})
+    assert response.status_code == 200
+    assert response.headers["content-type"] == GLB and response.content[:4] == b"glTF"
+    outfit_id = response.headers["x-outfit-id"]
+    assert response.headers["content-location"] == f"/v1/outfits/{outfit_id}.glb"
+    assert client.get(f"/v1/outfits/{outfit_id}.glb").content == response.content
+
+
+@pytest.mark.parametrize(
+    ("accept", "expected"),
+    [(None, "application/json"), ("*/*", "application/json"), ("application/json", "application/json"),
+     (GLB, GLB), (f"{GLB}, */*", GLB), (f"application/json;q=0.5, {GLB}", GLB), ("model/*", GLB),
+     (f"{GLB};q=0.1, application/json", "application/json")],
+)  # fmt: skip
+def test_accept_negotiation(client: TestClient, accept, expected):
+    headers = {"Accept": accept} if accept else {}
+    assert client.post("/v1/outfits", json=TINY, headers=headers).headers["content-type"] == expected
+
+
+def test_unacceptable_accept_is_406(client: TestClient):
+    response = client.post("/v1/outfits", json=TINY, headers={"Accept": "text/html"})
+    assert response.status_code == 406
+    assert response.json() == {"detail": f"Accept: allowed application/json (default) or {GLB}"}
+
+
+def test_same_outfit_same_id_whatever_the_spelling(client: TestClient):
+    a = client.post("/v1/outfits", json={"garments": ["tshirt"]}).json()["id"]
+    b = client.post("/v1/outfits", json={"garments": ["tshirt"], "options": {"untangle": True},
+                                         "body": {"height_cm": 178.0}}).json()["id"]  # fmt: skip
+    c = client.post("/v1/outfits", json={"garments": ["tshirt"], "body": {"height_cm": 179}}).json()["id"]
+    assert a == b != c
+
+
+def test_unknown_glb_is_404(client: TestClient):
+    response = client.get("/v1/outfits/" + "0" * 32 + ".glb")
+    assert response.status_code == 404
+    assert response.json() == {"detail": f"outfit {'0' * 32} is not in the cache (evicted, or never made): "
+                                         "POST /v1/outfits again"}  # fmt: skip
+
+
+def test_evicted_glb_is_404(fake_models_dir: Path):
+    app, _ = make_app(fake_models_dir, cache_entries=1)
+    with TestClient(app) as client:
+        app.state.tryon.wait_loaded(10)
+        first = client.post("/v1/outfits", json={"garments": ["tshirt"]}).json()["glb_url"]
+        client.post("/v1/outfits", json={"garments": ["pants"]})
+        assert client.get(first).status_code == 404
+
+
+ALLOWED_GARMENTS = "a list of 1-4 distinct garment ids, inner to outer (GET /v1/garments): tshirt, pants"
+ALLOWED_REQUEST = "a JSON object with `garments` (required), `body` and `options`"
+
+
+@pytest.mark.parametrize(
+    ("body", "field", "message", "allowed"),
+    [
+        ({"garments": ["cape"]}, "garments", "unknown id(s) ['cape']",
+         "1-4 distinct ids, inner to outer, from: tshirt, pants"),
+        ({"garments": []}, "garments", "List should have at least 1 item after validation, not 0",
+         ALLOWED_GARMENTS),
+        ({"garments": ["tshirt"] * 5}, "garments", "List should have at most 4 items after validation, not 5",
+         ALLOWED_GARMENTS),
+        ({"garments": ["tshirt", "tshirt"]}, "garments", "Value error, repeated id(s) ['tshirt']",
+         ALLOWED_GARMENTS),
+        ({"garments": [3]}, "garments.0", "Input should be a valid string", ALLOWED_GARMENTS),
+        ({"garments": "tshirt"}, "garments", "Input should be a valid list", ALLOWED_GARMENTS),
+        ({"garments": ["T-Shirt!"]}, "garments.0", "String should match pattern '^[a-z][a-z0-9_]{0,31}$'",
+         ALLOWED_GARMENTS),
+        ({"body": {}}, "garments", "Field required", ALLOWED_GARMENTS),
+        ({"garments": ["tshirt"], "body": {"gender": 2}}, "body.gender",
+         "Input should be less than or equal to 1", "a number from 0 (male) to 1 (female)"),
+        ({"garments": ["tshirt"], "body": {"gender": True}}, "body.gender", "Input should be a valid number",
+         "a number from 0 (male) to 1 (female)"),
+        ({"garments": ["tshirt"], "body": {"height_cm": "180"}}, "body.height_cm",
+         "Input should be a valid number",
+         "a number from 135 to 215; the exact range depends on gender"),
+        ({"garments": ["tshirt"], "body": {"weight_kg": -1}}, "body.weight_kg",
+         "Input should be greater than or equal to 25",
+         "a number from 25 to 155; the exact range depends on gender and height"),
+        ({"garments": ["tshirt"], "body": {"gender": 1, "height_cm": 210}}, "body.height_cm",
+         "height_cm=210 is too tall", "135.6-200.8"),
+        ({"garments": ["tshirt"], "body": {"age": 30}}, "body.age", "unknown field",
+         "an object with `gender`, `height_cm`, `weight_kg`"),
+        ({"garments": ["tshirt"], "options": {"untangle": "yes"}}, "options.untangle",
+         "Input should be a valid boolean", "true or false"),
+        ({"garments": ["tshirt"], "options": {"untangler": "magic"}}, "options.untangler",
+         "Input should be 'neural' or 'reference'", "`neural` or `reference`"),
+        ({"garments": ["tshirt"], "options": {"speed": 1}}, "options.speed", "unknown field",
+         "an object with `untangle`, `include_body`, `measure`, `untangler`"),
+        ({"garments": ["tshirt"], "colour": "red"}, "colour", "unknown field", ALLOWED_REQUEST),
+        (["tshirt"], "(request body)", "Input should be a valid dictionary or object to extract fields from",
+         ALLOWED_REQUEST),
+    ],
+)  # fmt: skip
+def test_bad_input_names_the_field_and_what_it_allows(client, body, field, message, allowed):
+    response = client.post("/v1/outfits", json=body)
+    assert response.status_code == 422, response.text
+    error = {"field": field, "message": message, "allowed": allowed}
+    assert error in response.json()["errors"], response.json()
+    assert response.json()["detail"].startswith(f"{field}: {message} (allowed: {allowed})")
+
+
+@pytest.mark.parametrize("value", ["NaN", "Infinity", "-Infinity", "1e999"])
+def test_non_finite_numbers_are_refused(client: TestClient, value):
+    raw = '{"garments": ["tshirt"], "body": {"height_cm": VALUE}}'.replace("VALUE", value)
+    response = client.post("/v1/outfits", content=raw, headers={"Content-Type": "application/json"})
+    assert response.status_code == 422, response.text
+    assert response.json()["errors"][0]["field"] == "body.height_cm"
+
+
+def test_malformed_json(client: TestClient):
+    headers = {"Content-Type": "application/json"}
+    response = client.post("/v1/outfits", content=b'{"garments": [', headers=headers)
+    assert response.status_code == 422
+    (error,) = response.json()["errors"]
+    assert error["field"] == "(request body)" and error["message"].startswith("malformed JSON")
+
+
+def test_body_that_is_not_utf8(client: TestClient):
+    headers = {"Content-Type": "application/json"}
+    response = client.post("/v1/outfits", content=b"\xff\xfe\xfa", headers=headers)
+    assert response.status_code == 422
+    (error,) = response.json()["errors"]
+    assert error == {"field": "(request body)", "message": "malformed JSON (not UTF-8 text)",
+                     "allowed": ALLOWED_REQUEST}  # fmt: skip
+
+
+def test_oversized_body_is_413_with_or_without_content_length(client: TestClient):
+    big = b'{"garments": ["tshirt"], "pad": "' + b"x" * 20_000 + b'"}'
+    expected = {"detail": "request body too large: at most 16384 bytes (setting ULNEF_MAX_BODY_BYTES)"}
+    response = client.post("/v1/outfits", content=big, headers={"Content-Type": "application/json"})
+    assert response.status_code == 413 and response.json() == expected
+
+    def chunks():
+        for i in range(0, len(big), 4096):
+            yield big[i : i + 4096]
+
+    streamed = client.post("/v1/outfits", content=chunks(), headers={"Content-Type": "application/json"})
+    assert streamed.status_code == 413 and streamed.json() == expected
+
+
+def test_bad_outfit_id_is_422(client: TestClient):
+    response = client.get("/v1/outfits/not-an-id.glb")
+    assert response.status_code == 422
+    assert response.json()["errors"][0]["field"] == "path.outfit_id"
+
+
+def test_deadline_answers_504_and_the_service_recovers(fake_models_dir: Path):
+    app, engine = make_app(fake_models_dir, delay=0.6, request_timeout_s=0.2)
+    with TestClient(app) as client:
+        app.state.tryon.wait_loaded(10)
+        t0 = time.perf_counter()
+        response = client.post("/v1/outfits", json=TINY)
+        assert time.perf_counter() - t0 < 0.5
+        assert response.status_code == 504 and response.headers["retry-after"] == "5"
+        assert response.json() == {"detail": "deadline exceeded: no outfit within the 0.2 s time budget"}
+        time.sleep(0.6)  # the job finished in the background and filled the cache
+        assert client.post("/v1/outfits", json=TINY).json()["cached"] is True
+
+
+def test_burst_gets_timely_answers_and_a_bounded_queue(fake_models_dir: Path):
+    """60 distinct requests at once on 1 worker + 2 queue places (0.2 s each): a few are served, the
+    rest refused at once with 503 + Retry-After; no request waits past its deadline."""
+    app, engine = make_app(fake_models_dir, delay=0.2, workers=1, queue_size=2, request_timeout_s=5)
+
+    async def burst(base: str):
+        async with httpx.AsyncClient(base_url=base, timeout=10) as http:
+
+            async def one(i: int):
+                t0 = time.perf_counter()
+                body = {"garments": ["tshirt"], "body": {"height_cm": 140 + i}}
+                r = await http.post("/v1/outfits", json=body)
+                return r, time.perf_counter() - t0
+
+            return await asyncio.gather(*(one(i) for i in range(60)))
+
+    with live_server(app) as base:
+        answers = asyncio.run(burst(base))
+        codes = [r.status_code for r, _ in answers]
+        assert set(codes) <= {200, 503}, codes
+        assert 3 <= codes.count(200) < 20, codes
+        refused = [r for r, _ in answers if r.status_code == 503]
+        assert all(int(r.headers["retry-after"]) >= 1 for r in refused)
+        assert refused[0].json()["detail"].startswith("overloaded: ")
+        assert max(seconds for _, seconds in answers) < 5
+        assert engine["it"].calls == codes.count(200)
+        assert app.state.tryon.worker.pending == 0
+        metrics = httpx.get(f"{base}/metrics").text
+        assert "ulnef_queue_depth 0.0" in metrics
+        assert httpx.get(f"{base}/healthz").status_code == 200
+
+
+def test_each_request_is_one_json_log_line(client: TestClient, caplog):
+    caplog.set_level(logging.INFO, logger="service.access")
+    response = client.post("/v1/outfits", json={"garments": ["cape"]})
+    (record,) = [r for r in caplog.records if r.name == "service.access"]
+    line = json.loads(JsonFormatter().format(record))
+    assert line["message"] == "request" and line["level"] == "info"
+    assert line["route"] == "/v1/outfits" and line["status"] == 422 and line["method"] == "POST"
+    assert line["request_id"] == response.headers["x-request-id"] and line["ms"] >= 0
