@@ -21,16 +21,21 @@ test: $(VENV)/.installed-test $(JS_DIR)/node_modules/.installed chromium
 	$(BIN)/pytest
 
 # Rebuild every committed model from scratch (body basis, garment catalog, drape dataset,
-# explicit garment models, untangling operator, neural fields), then the manifest. Every long
-# step resumes where it stopped (data/drapes, build/*.ckpt, build/fields); delete them to redo.
+# explicit garment models, untangling operator, neural fields), then the manifest. Each network is
+# trained by training.X into a checkpoint and written to ONNX by export.X (export reads training,
+# never the other way). Every long step resumes where it stopped (data/drapes, build/*.ckpt,
+# build/fields); delete them to redo.
 models: $(VENV)/.installed-test
 	$(BIN)/python -m export.body
 	$(BIN)/python -m export.body_sdf
 	$(BIN)/python -m training.garments
 	$(BIN)/python -m training.drape
 	$(BIN)/python -m training.explicit
+	$(BIN)/python -m export.explicit
 	$(BIN)/python -m training.untangler
+	$(BIN)/python -m export.untangler
 	$(BIN)/python -m training.fields
+	$(BIN)/python -m export.fields
 	$(BIN)/python -m export.manifest
 
 pictures: $(VENV)/.installed-test

@@ -1,5 +1,5 @@
-"""Export the explicit garment models to ONNX: ``python -m export.explicit`` (seconds; also run by
-``python -m training.explicit``).
+"""Export the explicit garment models to ONNX: ``python -m export.explicit [--out DIR] [ids...]``
+(seconds), after ``python -m training.explicit`` wrote their npz files.
 
 The graph is the numpy reference ``service.pipeline.explicit.ExplicitModel`` in torch: normalise beta, the
 tanh MLP, then mean + coefficients x basis, with the PCA basis stored float16 (as in the npz) and cast in the
@@ -81,9 +81,11 @@ def export_explicit(garment_id: str, directory: Path | None = None) -> float:
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("ids", nargs="*")
+    parser.add_argument("--out", type=Path, default=None, help="npz models directory (models/explicit)")
     args = parser.parse_args(argv)
     for gid in args.ids or load_catalog():
-        print(f"{gid}: exported, {export_explicit(gid) * 1e3:.4f} mm max off the numpy reference")
+        off = export_explicit(gid, args.out)
+        print(f"{gid}: exported, {off * 1e3:.4f} mm max off the numpy reference")
 
 
 if __name__ == "__main__":

@@ -1,11 +1,12 @@
-"""Export a trained neural field to ONNX (called by ``python -m training.fields``).
+"""Export the trained neural fields to ONNX: ``python -m export.fields [ids...]`` reads the finished
+checkpoints of ``python -m training.fields`` (``build/fields/<id>.pt``) and writes ``models/fields/``.
 
 The contract (names, points axis, opset, tolerances) lives in ``service.pipeline.fields``. Two graphs per
 field: values (f, h; what the 30k-point speed target counts) and values with x-gradients. The export is a
 contract plus a check: both files are run with onnxruntime on check points around the surface and the export
 raises unless they match torch within ``EXPORT_TOLERANCE``.
 
-``python -m export.fields [ids...]`` re-exports the gradient graphs without retraining: the weights are
+``python -m export.fields --gradients-only [ids...]`` re-exports the gradient graphs alone: the weights are
 read back from the committed values graphs (``load_exported``), the new graph is checked against torch
 and against the graph it replaces, and ``fields.json`` records the new check. Then refresh the
 manifest (``python -m export.manifest``).
@@ -183,15 +184,31 @@ def field_entry(net: FieldNet, check: dict, errors: dict, seconds: float) -> dic
 def main(argv: list[str] | None = None) -> None:
     from service.pipeline.catalog import load_catalog
     from service.pipeline.fields import BODY, default_directory
-    from training.fields.train import Surfaces, held_out
+    from training.fields.train import Surfaces, field_errors, finished_run, held_out, torch_predict
 
-    parser = argparse.ArgumentParser(description="Re-export the gradient graphs from the committed weights.")
+    parser = argparse.ArgumentParser(description="Export the trained neural fields to ONNX.")
     parser.add_argument("ids", nargs="*", help=f"garment ids or {BODY!r} (default: all)")
+    parser.add_argument("--gradients-only", action="store_true",
+                        help="re-export only the gradient graphs, from the committed weights")  # fmt: skip
     args = parser.parse_args(argv)
     directory = default_directory()
     for field_id in args.ids or [*load_catalog(), BODY]:
-        beta, samples = held_out(Surfaces(field_id))[0]  # the check points of ``python -m training.fields``
+        surfaces = Surfaces(field_id)
+        tests = held_out(surfaces)
+        beta, samples = tests[0]  # the check points: around the surface, on a held-out shape
         x, beta = samples.x[:4096].astype(np.float32), beta[None].astype(np.float32)
+        if not args.gradients_only:
+            run = finished_run(surfaces, field_id)
+            if run is None:
+                raise SystemExit(f"{field_id}: no finished checkpoint (python -m training.fields {field_id})")
+            errors = field_errors(torch_predict(run.net), tests)
+            check = export_field(run.net, field_id, directory, x, beta)
+            write_config(directory, {field_id: field_entry(run.net, check, errors, run.seconds)})
+            print(
+                f"{field_id}: held-out f {errors['f_mm']:.2f} mm, h {errors['h_mm']:.2f} mm; "
+                f"export check {max(check.values()):.2g}"
+            )
+            continue
         check = reexport_gradient(field_id, directory, x, beta)
         entry = json.loads((directory / CONFIG_FILE).read_text())["fields"][field_id]
         checks = entry["export_check_max_abs_diff"] | check

@@ -1,4 +1,5 @@
-"""Export the neural untangling operator to ONNX (called by ``python -m training.untangler``).
+"""Export the trained neural untangling operator to ONNX: ``python -m export.untangler`` reads the
+finished checkpoint of ``python -m training.untangler`` and writes ``models/untangler/``.
 
 The contract (input/output names, batch axis, opset, tolerances) lives in ``service.pipeline.untangle_onnx``.
 Three graphs: ``values.onnx`` (f only, what the 30k-point speed target counts), ``jacobian.onnx``
@@ -8,7 +9,7 @@ run with onnxruntime on a check batch (every sampler, points inside the h* blend
 and the export raises unless it matches torch within ``EXPORT_TOLERANCE``, the row graph for each of
 the 5 one-hot rows, also against the rows of ``jacobian.onnx``.
 
-``python -m export.untangler`` re-exports the row graph without retraining: the weights are read back
+``python -m export.untangler --row-only`` re-exports the row graph alone: the weights are read back
 from the committed ``values.onnx`` (``load_exported``), the new graph is checked against torch and
 against the rows of the committed ``jacobian.onnx``, and ``untangler.json`` records the check. Then
 refresh the manifest (``python -m export.manifest``).
@@ -47,7 +48,7 @@ from service.pipeline.untangle_onnx import (
     VALUES_FILE,
     default_directory,
 )
-from training.untangler import UntanglerConfig, UntanglerNet
+from training.untangler import UntanglerConfig, UntanglerNet, evaluate, load_trained
 from training.untangler_data import sample_batch
 
 CHECK_POINTS = 4096
@@ -254,10 +255,25 @@ def reexport_row(directory: Path) -> dict:
 
 
 def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(description="Re-export jacobian_row.onnx from the committed weights.")
-    parser.add_argument("--directory", type=Path, default=None, help="default: models/untangler")
+    parser = argparse.ArgumentParser(description="Export the trained untangling operator to ONNX.")
+    parser.add_argument("--checkpoint", type=Path, default=Path("build/untangler.ckpt"),
+                        help="a finished run of python -m training.untangler")  # fmt: skip
+    parser.add_argument("--out", type=Path, default=None, help="default: models/untangler")
+    parser.add_argument("--row-only", action="store_true",
+                        help="re-export only jacobian_row.onnx from the weights in --out")  # fmt: skip
     args = parser.parse_args(argv)
-    directory = args.directory or default_directory()
+    directory = args.out or default_directory()
+    if not args.row_only:
+        result = load_trained(args.checkpoint)
+        meta = {
+            "evaluation": evaluate(result.net),
+            "train_seconds": round(result.seconds, 1),
+            "torch_threads": result.torch_threads,
+        }
+        check = export(result.net, directory, metrics=meta)
+        print(json.dumps(meta["evaluation"], indent=2))
+        print(f"wrote {directory}; export check (max abs difference onnxruntime vs torch): {check}")
+        return
     check = reexport_row(directory)
     meta = json.loads((directory / CONFIG_FILE).read_text())
     meta["export_check_max_abs_diff"] = {

@@ -2,6 +2,9 @@
 
     python -m training.explicit [--data data/drapes] [--out models/explicit] [ids...]
 
+Writes ``<id>.npz`` (the numpy model the service's reference reads); ``python -m export.explicit``
+then writes the ONNX graph beside it.
+
 Per garment: PCA of the canonical training drapes (components up to 99.9 % of the variance),
 then a small tanh MLP beta -> PCA coefficients trained with full-batch L-BFGS on the vertex
 error (the basis is orthonormal, so coefficient error is vertex error). The MLP is kept tiny
@@ -93,8 +96,6 @@ def main(argv=None) -> None:
     args = parser.parse_args(argv)
     import json
 
-    from export.explicit import export_explicit
-
     out = args.out or models_dir() / "explicit"
     ids = args.ids or json.loads((args.data / "shapes.json").read_text())["config"]["garments"]
     for gid in ids:
@@ -103,11 +104,9 @@ def main(argv=None) -> None:
         pred = np.stack([model.canonical(b) for b in train["beta"]])
         err = np.linalg.norm(pred - train["canonical"], axis=2)
         path = model.save(out / f"{gid}.npz")
-        off = export_explicit(gid, out)
-        print(
-            f"{gid}: {model.basis.shape[0]} components, train error mean {err.mean() * 1e3:.2f} mm -> {path} "
-            f"(+ .onnx, {off * 1e3:.4f} mm off)"
-        )
+        mean_mm = err.mean() * 1e3
+        print(f"{gid}: {model.basis.shape[0]} components, train error mean {mean_mm:.2f} mm -> {path}")
+    print(f"next: python -m export.explicit --out {out} {' '.join(ids)}")
 
 
 if __name__ == "__main__":

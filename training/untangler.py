@@ -1,6 +1,7 @@
-"""Train the neural untangling operator O_theta (paper 3.2, eq. 7) and export it to models/untangler/.
+"""Train the neural untangling operator O_theta (paper 3.2, eq. 7) into a checkpoint.
 
-    python -m training.untangler [--out models/untangler] [--checkpoint build/untangler.ckpt] [--steps N]
+    python -m training.untangler [--checkpoint build/untangler.ckpt] [--steps N]
+    python -m export.untangler [--checkpoint build/untangler.ckpt]      # then: ONNX into models/untangler/
 
 About 10 minutes on one thread of the 2-core build machine; an interrupted run resumes from its
 checkpoint (delete it to start afresh). An MLP over (f*, h*) for 5 slots (body + 4 garments): garment
@@ -30,7 +31,7 @@ import numpy as np
 import torch
 
 from service.pipeline.untangle import GAP_DELTA, untangle
-from service.pipeline.untangle_onnx import N_SLOTS, NEAR_SURFACE, default_directory
+from service.pipeline.untangle_onnx import N_SLOTS, NEAR_SURFACE
 from training.untangler_data import SAMPLERS, sample_batch
 
 Activation = Literal["relu", "silu"]
@@ -259,6 +260,8 @@ class TrainResult:
     net: UntanglerNet
     seconds: float
     """Wall time of all the steps, summed over the runs a resumed training took."""
+    torch_threads: int = 1
+    """Threads of the run that finished it (``seconds`` depends on them)."""
 
 
 def train(
@@ -308,17 +311,26 @@ def train(
             checkpoint.parent.mkdir(parents=True, exist_ok=True)
             state = {"config": asdict(config), "net": net.state_dict(), "opt": opt.state_dict()}
             state.update(step=done, seconds=before + time.perf_counter() - t0)
+            state["torch_threads"] = torch.get_num_threads()
             torch.save(state, checkpoint)
-    return TrainResult(net, before + time.perf_counter() - t0)
+    return TrainResult(net, before + time.perf_counter() - t0, torch.get_num_threads())
+
+
+def load_trained(checkpoint: Path) -> TrainResult:
+    """The finished run in ``checkpoint``; raises ValueError naming the step if it is unfinished."""
+    state = torch.load(checkpoint, weights_only=False)
+    config = UntanglerConfig(**state["config"] | {"mixture": tuple(state["config"]["mixture"])})
+    if state["step"] < config.steps:
+        raise ValueError(f"{checkpoint} stopped at step {state['step']} of {config.steps}: train on first")
+    net = UntanglerNet(config)
+    net.load_state_dict(state["net"])
+    return TrainResult(net.float().eval(), state["seconds"], state.get("torch_threads", 1))
 
 
 def main(argv=None) -> None:
-    from export.untangler import export  # export imports this module
-
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
-    parser.add_argument("--out", type=Path, default=None, help="default: models/untangler")
     parser.add_argument("--checkpoint", type=Path, default=Path("build/untangler.ckpt"))
     parser.add_argument("--steps", type=int, default=UntanglerConfig.steps)
     parser.add_argument("--threads", type=int, default=1, help="torch threads")
@@ -326,13 +338,8 @@ def main(argv=None) -> None:
     torch.set_num_threads(args.threads)
     config = UntanglerConfig(steps=args.steps)
     result = train(config, args.checkpoint)
-    metrics = evaluate(result.net)
-    print(json.dumps(metrics, indent=2))
-    out = args.out or default_directory()
-    meta = {"evaluation": metrics, "train_seconds": round(result.seconds, 1), "torch_threads": args.threads}
-    check = export(result.net, out, metrics=meta)
-    print(f"export check (max abs difference onnxruntime vs torch): {check}")
-    print(f"wrote {out} after {result.seconds / 60:.1f} min of training")
+    print(json.dumps(evaluate(result.net), indent=2))
+    print(f"{args.checkpoint}: {result.seconds / 60:.1f} min of training; next: python -m export.untangler")
 
 
 if __name__ == "__main__":

@@ -1,18 +1,16 @@
-"""python -m training.fields [ids...] [--steps N]: train, evaluate and export the neural fields.
+"""python -m training.fields [ids...] [--steps N]: train and evaluate the neural fields.
 
 Default: every catalog garment and the body (about 5 minutes each on the 2-core build machine,
-resumable). Writes ``models/fields/<id>.onnx``, ``<id>.grad.onnx`` and ``fields.json``.
+resumable). Checkpoints go to ``build/fields/<id>.pt``; ``python -m export.fields`` then writes
+``models/fields/<id>.onnx``, ``<id>.grad.onnx`` and ``fields.json`` from them.
 """
 
 import argparse
 from dataclasses import replace
 
-import numpy as np
 import torch
 
-from export.fields import export_field, field_entry, write_config
 from service.pipeline.catalog import load_catalog
-from service.pipeline.fields import default_directory
 from training.fields.net import FieldConfig, fourier_sigma
 from training.fields.train import BODY, Surfaces, field_errors, held_out, torch_predict, train_field
 
@@ -22,18 +20,13 @@ parser.add_argument("--steps", type=int, default=FieldConfig.steps)
 parser.add_argument("--threads", type=int, default=2, help="torch threads")
 args = parser.parse_args()
 torch.set_num_threads(args.threads)
-out = default_directory()
 for field_id in args.ids or [*load_catalog(), BODY]:
     surfaces = Surfaces(field_id)
     sigma = fourier_sigma(surfaces.box()[1])
     result = train_field(surfaces, replace(FieldConfig(), steps=args.steps, sigma=sigma))
-    tests = held_out(surfaces)
-    errors = field_errors(torch_predict(result.net), tests)
-    beta, samples = tests[0]
-    x = samples.x[:4096].astype(np.float32)
-    check = export_field(result.net, field_id, out, x, beta[None].astype(np.float32))
-    write_config(out, {field_id: field_entry(result.net, check, errors, result.seconds)})
+    errors = field_errors(torch_predict(result.net), held_out(surfaces))
     print(
         f"{field_id}: held-out f {errors['f_mm']:.2f} mm, h {errors['h_mm']:.2f} mm; "
-        f"{result.seconds / 60:.1f} min; export check {max(check.values()):.2g}"
+        f"{result.seconds / 60:.1f} min"
     )
+print("next: python -m export.fields")

@@ -188,6 +188,12 @@ def train_field(
 
 def load_trained(surfaces: Surfaces, name: str) -> FieldNet | None:
     """The finished network of checkpoint ``name``, or None if it is missing or unfinished."""
+    run = finished_run(surfaces, name)
+    return None if run is None else run.net
+
+
+def finished_run(surfaces: Surfaces, name: str) -> TrainResult | None:
+    """The finished run (network, training seconds) of checkpoint ``name``, or None."""
     path = CHECKPOINT_DIR / f"{name}.pt"
     if not path.is_file():
         return None
@@ -197,7 +203,7 @@ def load_trained(surfaces: Surfaces, name: str) -> FieldNet | None:
         return None
     net = FieldNet(config, *surfaces.box())
     net.load_state_dict(state["net"])
-    return net
+    return TrainResult(net, state["seconds"])
 
 
 def held_out(
