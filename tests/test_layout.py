@@ -133,3 +133,22 @@ def test_downward_and_same_layer_imports_pass(tmp_path: Path):
         (tmp_path / path).parent.mkdir(parents=True, exist_ok=True)
         (tmp_path / path).write_text(source)
     assert violations(tmp_path) == []
+
+
+def test_the_architecture_map_names_files_that_exist():
+    """``docs/architecture.md`` stays true: every path, module file and ``python -m`` it names exists."""
+    import re
+
+    text = (REPO / "docs" / "architecture.md").read_text()
+    missing = []
+    for token in set(re.findall(r"(?:service|training|export|tests|benchmarks|models|docs)/[\w/.]*", text)):
+        if not (REPO / token.rstrip(".")).exists():
+            missing.append(token)
+    for name in set(re.findall(r"(?<![\w/])(\w+\.py)\b", text)):
+        if not any((REPO / "service").rglob(name)):
+            missing.append(name)
+    for module in set(re.findall(r"python -m (\w+(?:\.\w+)*)", text)):
+        path = REPO.joinpath(*module.split("."))
+        if not (path.with_suffix(".py").is_file() or (path / "__main__.py").is_file()):
+            missing.append(f"python -m {module}")
+    assert sorted(missing) == []
