@@ -188,10 +188,11 @@ def main(argv: list[str] | None = None) -> None:
 
     parser = argparse.ArgumentParser(description="Export the trained neural fields to ONNX.")
     parser.add_argument("ids", nargs="*", help=f"garment ids or {BODY!r} (default: all)")
+    parser.add_argument("--out", type=Path, default=None, help="default: models/fields")
     parser.add_argument("--gradients-only", action="store_true",
-                        help="re-export only the gradient graphs, from the committed weights")  # fmt: skip
+                        help="re-export only the gradient graphs, from the weights in --out")  # fmt: skip
     args = parser.parse_args(argv)
-    directory = default_directory()
+    directory = args.out or default_directory()
     for field_id in args.ids or [*load_catalog(), BODY]:
         surfaces = Surfaces(field_id)
         tests = held_out(surfaces)
@@ -200,7 +201,7 @@ def main(argv: list[str] | None = None) -> None:
         if not args.gradients_only:
             run = finished_run(surfaces, field_id)
             if run is None:
-                raise SystemExit(f"{field_id}: no finished checkpoint (python -m training.fields {field_id})")
+                raise SystemExit(f"export.fields: no finished checkpoint of {field_id} (training.fields)")
             errors = field_errors(torch_predict(run.net), tests)
             check = export_field(run.net, field_id, directory, x, beta)
             write_config(directory, {field_id: field_entry(run.net, check, errors, run.seconds)})

@@ -264,7 +264,10 @@ def main(argv: list[str] | None = None) -> None:
     args = parser.parse_args(argv)
     directory = args.out or default_directory()
     if not args.row_only:
-        result = load_trained(args.checkpoint)
+        try:
+            result = load_trained(args.checkpoint)
+        except ValueError as e:
+            raise SystemExit(f"export.untangler: {e}") from None
         meta = {
             "evaluation": evaluate(result.net),
             "train_seconds": round(result.seconds, 1),

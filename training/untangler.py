@@ -317,11 +317,13 @@ def train(
 
 
 def load_trained(checkpoint: Path) -> TrainResult:
-    """The finished run in ``checkpoint``; raises ValueError naming the step if it is unfinished."""
+    """The finished run in ``checkpoint``; ValueError if it is missing or unfinished (naming the step)."""
+    if not Path(checkpoint).is_file():
+        raise ValueError(f"{checkpoint}: no training run (python -m training.untangler)")
     state = torch.load(checkpoint, weights_only=False)
     config = UntanglerConfig(**state["config"] | {"mixture": tuple(state["config"]["mixture"])})
     if state["step"] < config.steps:
-        raise ValueError(f"{checkpoint} stopped at step {state['step']} of {config.steps}: train on first")
+        raise ValueError(f"{checkpoint} stopped at step {state['step']} of {config.steps}: train it on first")
     net = UntanglerNet(config)
     net.load_state_dict(state["net"])
     return TrainResult(net.float().eval(), state["seconds"], state.get("torch_threads", 1))

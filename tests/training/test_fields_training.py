@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from dataclasses import replace
 
 import numpy as np
@@ -9,6 +10,7 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
+from export import fields as export_fields  # noqa: E402
 from export.fields import export_field  # noqa: E402
 from service.pipeline.fields import NeuralField  # noqa: E402
 from training.fields import train as field_train  # noqa: E402
@@ -55,5 +57,28 @@ def test_tiny_training_learns_resumes_and_exports(dirs):
     served = NeuralField("tshirt", dirs / "models", threads=1)(x, beta)
     with torch.no_grad():
         f, h = result.net(torch.from_numpy(x), torch.from_numpy(beta[None].astype(np.float32)))
+    np.testing.assert_allclose(served.f, f.numpy(), atol=1e-5)
+    np.testing.assert_allclose(served.h, h.numpy(), atol=1e-5)
+
+
+def test_export_command_writes_the_finished_checkpoint(dirs):
+    """``python -m export.fields ID --out DIR`` serves the network ``python -m training.fields ID`` left,
+    with its held-out errors and training time; without a finished checkpoint it refuses, naming the id."""
+    out = dirs / "out"
+    surfaces = field_train.Surfaces("tshirt")
+    with pytest.raises(SystemExit, match="no finished checkpoint of tshirt"):
+        export_fields.main(["tshirt", "--out", str(out)])
+    result = field_train.train_field(surfaces, TINY, log=lambda _: None)
+    export_fields.main(["tshirt", "--out", str(out)])
+    entry = json.loads((out / "fields.json").read_text())["fields"]["tshirt"]
+    assert entry["train_seconds"] == round(result.seconds, 1)
+    expected = field_train.field_errors(field_train.torch_predict(result.net), field_train.held_out(surfaces))
+    assert entry["held_out"] == pytest.approx(expected, rel=1e-9)
+    centre = surfaces.box()[0]
+    x = (centre + np.random.default_rng(0).uniform(-0.1, 0.1, (500, 3))).astype(np.float32)
+    beta = np.array([0.3, 0.5, 0.5], np.float32)
+    served = NeuralField("tshirt", out, threads=1)(x, beta)
+    with torch.no_grad():
+        f, h = result.net(torch.from_numpy(x), torch.from_numpy(beta[None]))
     np.testing.assert_allclose(served.f, f.numpy(), atol=1e-5)
     np.testing.assert_allclose(served.h, h.numpy(), atol=1e-5)

@@ -14,6 +14,7 @@ torch = pytest.importorskip("torch")
 pytest.importorskip("onnx")
 pytest.importorskip("onnxruntime")
 
+from export import untangler as export_untangler  # noqa: E402
 from export.untangler import export, load_exported, reexport_row  # noqa: E402
 from service.pipeline.untangle import untangle  # noqa: E402
 from service.pipeline.untangle_onnx import CONFIG_FILE, EXPORT_TOLERANCE, PAD_F, PAD_H, NeuralUntangler  # noqa: E402
@@ -155,3 +156,22 @@ def test_export_raises_when_the_row_graph_is_beyond_tolerance(tiny_net, tmp_path
     monkeypatch.setitem(EXPORT_TOLERANCE, "jacobian_row", (-1.0, 0.0))
     with pytest.raises(RuntimeError, match="jacobian_row.onnx:jacobian_row differs from torch"):
         export(tiny_net, tmp_path)
+
+
+def test_export_command_writes_the_finished_checkpoint(tmp_path, capsys):
+    """``python -m export.untangler`` exports the checkpoint ``python -m training.untangler`` left, with
+    its training time and threads, and refuses an unfinished one naming the step."""
+    checkpoint, out = tmp_path / "untangler.ckpt", tmp_path / "models"
+    train(TINY, checkpoint, log=silent, stop_at=30)
+    with pytest.raises(SystemExit, match="stopped at step 30 of 80"):
+        export_untangler.main(["--checkpoint", str(checkpoint), "--out", str(out)])
+    with pytest.raises(SystemExit, match="no training run"):
+        export_untangler.main(["--checkpoint", str(tmp_path / "none.ckpt"), "--out", str(out)])
+    trained = train(TINY, checkpoint, log=silent)
+    export_untangler.main(["--checkpoint", str(checkpoint), "--out", str(out)])
+    for (name, a), b in zip(trained.net.state_dict().items(), load_exported(out).state_dict().values(),
+                            strict=True):  # fmt: skip
+        assert torch.equal(a, b), name
+    meta = json.loads((out / CONFIG_FILE).read_text())
+    assert meta["train_seconds"] == round(trained.seconds, 1) and meta["torch_threads"] == 1
+    assert set(meta["evaluation"]) == set(evaluate(trained.net, n=10))
