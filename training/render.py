@@ -521,8 +521,8 @@ def grid(
     return np.concatenate(rows, axis=0)
 
 
-def save_png(path: str | Path, image: np.ndarray) -> Path:
-    """Write an (H, W, 3) float RGB image in [0, 1] (clipped) as an 8-bit PNG; creates parent folders."""
+def png_bytes(image: np.ndarray) -> bytes:
+    """An (H, W, 3) float RGB image in [0, 1] (clipped) as 8-bit PNG bytes."""
     img = _check_image(image)
     data = (img * 255 + 0.5).astype(np.uint8)
     h, w, _ = data.shape
@@ -532,10 +532,14 @@ def save_png(path: str | Path, image: np.ndarray) -> Path:
         return struct.pack(">I", len(payload)) + tag + payload + struct.pack(">I", zlib.crc32(tag + payload))
 
     png = b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, 2, 0, 0, 0))
-    png += chunk(b"IDAT", zlib.compress(raw, 6)) + chunk(b"IEND", b"")
+    return png + chunk(b"IDAT", zlib.compress(raw, 6)) + chunk(b"IEND", b"")
+
+
+def save_png(path: str | Path, image: np.ndarray) -> Path:
+    """Write an (H, W, 3) float RGB image in [0, 1] (clipped) as an 8-bit PNG; creates parent folders."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_bytes(png)
+    path.write_bytes(png_bytes(image))
     return path
 
 

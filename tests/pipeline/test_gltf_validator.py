@@ -55,3 +55,28 @@ def test_validator_catches_a_broken_glb(tmp_path: Path):
     path = tmp_path / "bad.glb"
     path.write_bytes(bad)
     assert validate([path])[str(path)]["numErrors"] > 0
+
+
+def test_a_textured_glb_has_no_validator_errors(tmp_path: Path):
+    """UVs of a display mesh with seams, base colour and normal textures, an image shared by two layers."""
+    from service.pipeline.appearance import DisplayMesh, Material
+    from service.pipeline.gltf import GltfLayer
+    from tests.meshes import grid_mesh
+    from training.render import png_bytes
+
+    v, f = grid_mesh(4)
+    source = f.reshape(-1)
+    display = DisplayMesh(source, (v[source, :2] * 3).astype(np.float32), np.arange(f.size).reshape(f.shape))
+    cloth = png_bytes(np.random.default_rng(0).uniform(size=(16, 16, 3)))
+    bump = png_bytes(np.broadcast_to([0.5, 0.5, 1.0], (16, 16, 3)))
+    knit = Material(textures={"base_color": cloth, "normal": bump})
+    denim = Material((0.5, 0.5, 0.5, 1.0), 0.8, {"base_color": cloth})
+    layers = [
+        GltfLayer("body", v, f),
+        GltfLayer("tshirt", v + [0, 0, 0.01], f, display, knit),
+        GltfLayer("jacket", v + [0, 0, 0.02], f, display, denim),
+    ]
+    path = tmp_path / "textured.glb"
+    path.write_bytes(outfit_glb(layers))
+    report = validate([path])[str(path)]
+    assert report["numErrors"] == 0, report["errors"]
