@@ -83,6 +83,7 @@ def cmd_outfit(args: argparse.Namespace) -> int:
     from service.pipeline.body import ShapeOutOfRange, shape_from_measurements
     from service.pipeline.gltf import outfit_glb
     from service.pipeline.outfit import OutfitModels, make_outfit
+    from service.pipeline.tryon import glb_layers
 
     models = OutfitModels.load(threads=args.threads)
     ids = [g for g in args.garments.split(",") if g]
@@ -92,10 +93,8 @@ def cmd_outfit(args: argparse.Namespace) -> int:
     except (ShapeOutOfRange, ValueError) as err:
         print(f"ulnef outfit: {err}", file=sys.stderr)
         return 2
-    layers = [(gid, v, f) for gid, v, f in outfit.garments]
-    if not args.no_body:
-        layers.insert(0, ("body", outfit.body_vertices, outfit.body_faces))
-    Path(args.output).write_bytes(outfit_glb(layers))
+    body = None if args.no_body else (outfit.body_vertices, outfit.body_faces)
+    Path(args.output).write_bytes(outfit_glb(glb_layers(outfit.garments, models.catalog, body)))
     print(json.dumps(outfit.report, indent=2))
     return 0
 

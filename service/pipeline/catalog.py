@@ -3,7 +3,10 @@
 Files: ``models/garments/catalog.json`` (ids, names, categories, layer ranks, file names) and
 one ``<id>.npz`` per garment with ``vertices (V, 3) float32`` (metres, Anny frame: Z up, body
 facing -Y), ``faces (F, 3) int32`` (normals away from the body) and, per opening ``name``,
-``opening_<name> (L,) int32``: the boundary loop's vertex indices in order.
+``opening_<name> (L,) int32``: the boundary loop's vertex indices in order. A garment with a look
+also has ``display_source (D,) int32``, ``display_uv (D, 2) float32`` and ``display_faces (F, 3) int32``
+(``service.pipeline.appearance.DisplayMesh``), and its catalog entry a ``material``: base colour,
+roughness and texture files (PNG, beside the npz) by slot.
 """
 
 from __future__ import annotations
@@ -16,6 +19,7 @@ from typing import Literal
 
 import numpy as np
 
+from service.pipeline.appearance import DisplayMesh, Material
 from service.process.paths import models_dir
 
 Category = Literal["top", "bottom"]
@@ -25,7 +29,8 @@ Category = Literal["top", "bottom"]
 class Garment:
     """One catalog garment in its rest shape on the mean body.
 
-    vertices: (V, 3) float64; faces: (F, 3) int64; openings: name -> (L,) int64 loop.
+    vertices: (V, 3) float64; faces: (F, 3) int64; openings: name -> (L,) int64 loop; display and
+    material: how it looks (None: a flat colour, no UVs).
     """
 
     id: str
@@ -35,6 +40,8 @@ class Garment:
     vertices: np.ndarray
     faces: np.ndarray
     openings: dict[str, np.ndarray] = field(default_factory=dict)
+    display: DisplayMesh | None = None
+    material: Material | None = None
 
     def summary(self) -> dict:
         return {
@@ -45,17 +52,36 @@ class Garment:
             "vertices": int(len(self.vertices)),
             "faces": int(len(self.faces)),
             "openings": sorted(self.openings),
+            "material": None if self.material is None else self.material.summary(),
         }
+
+    def catalog_entry(self) -> dict:
+        """This garment's entry in ``catalog.json`` (with ``save_garment``'s file names)."""
+        entry = {"id": self.id, "name": self.name, "category": self.category, "layer_rank": self.layer_rank,
+                 "file": f"{self.id}.npz"}  # fmt: skip
+        if self.material is not None:
+            m = self.material
+            entry["material"] = {"base_color": list(m.base_color), "roughness": m.roughness,
+                                 "textures": dict(sorted(m.texture_files.items()))}  # fmt: skip
+        return entry
 
 
 def save_garment(directory: Path, garment: Garment) -> Path:
-    """Write ``<id>.npz`` (float32 vertices, int32 indices)."""
+    """Write ``<id>.npz`` (float32 vertices, int32 indices) and the material's textures."""
     directory.mkdir(parents=True, exist_ok=True)
     arrays = {
         "vertices": garment.vertices.astype(np.float32),
         "faces": garment.faces.astype(np.int32),
     }
     arrays.update({f"opening_{k}": v.astype(np.int32) for k, v in garment.openings.items()})
+    if garment.display is not None:
+        garment.display.check(len(garment.vertices), garment.faces)
+        arrays |= {"display_source": garment.display.source.astype(np.int32),
+                   "display_uv": garment.display.uv.astype(np.float32),
+                   "display_faces": garment.display.faces.astype(np.int32)}  # fmt: skip
+    if garment.material is not None:
+        for slot, png in garment.material.textures.items():
+            (directory / garment.material.texture_files[slot]).write_bytes(png)
     path = directory / f"{garment.id}.npz"
     np.savez_compressed(path, **arrays)
     return path
@@ -65,6 +91,11 @@ def load_garment(directory: Path, entry: dict) -> Garment:
     with np.load(directory / entry["file"]) as data:
         prefix = "opening_"
         openings = {k[len(prefix) :]: data[k].astype(np.int64) for k in data.files if k.startswith(prefix)}
+        display = None
+        if "display_source" in data.files:
+            display = DisplayMesh(data["display_source"].astype(np.int64), data["display_uv"],
+                                  data["display_faces"].astype(np.int64))  # fmt: skip
+            display.check(len(data["vertices"]), data["faces"].astype(np.int64))
         return Garment(
             id=entry["id"],
             name=entry["name"],
@@ -73,7 +104,21 @@ def load_garment(directory: Path, entry: dict) -> Garment:
             vertices=data["vertices"].astype(np.float64),
             faces=data["faces"].astype(np.int64),
             openings=openings,
+            display=display,
+            material=_load_material(directory, entry.get("material")),
         )
+
+
+def _load_material(directory: Path, spec: dict | None) -> Material | None:
+    if spec is None:
+        return None
+    files = dict(spec.get("textures", {}))
+    return Material(
+        base_color=tuple(float(c) for c in spec["base_color"]),
+        roughness=float(spec.get("roughness", 0.9)),
+        textures={slot: (directory / name).read_bytes() for slot, name in files.items()},
+        texture_files=files,
+    )
 
 
 @lru_cache(maxsize=4)

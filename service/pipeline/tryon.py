@@ -104,6 +104,18 @@ def model_version(models_dir: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()[:12]
 
 
+def glb_layers(garments, catalog: dict, body: tuple[np.ndarray, np.ndarray] | None):
+    """``GltfLayer``s of fitted ``garments`` [(id, vertices (V, 3), faces (F, 3))], each with its catalog
+    look (display mesh and material, when it has one), the body's (vertices, faces) first unless None."""
+    from service.pipeline.gltf import GltfLayer
+
+    layers = [GltfLayer("body", *body)] if body is not None else []
+    for gid, v, f in garments:
+        g = catalog.get(gid)
+        layers.append(GltfLayer(gid, v, f, g.display if g else None, g.material if g else None))
+    return layers
+
+
 def finite_layers(
     garments: list[tuple[str, np.ndarray, np.ndarray]],
     fallback: dict[str, np.ndarray],
@@ -176,9 +188,8 @@ class ModelEngine:
             explicit = {g: v for g, v, _ in explicit_outfit().garments}
             garments, bad = finite_layers(garments, explicit)
             flagged += bad
-        layers = [(g, v, f) for g, v, f in garments]
-        if spec.include_body:
-            layers.insert(0, ("body", outfit.body_vertices, outfit.body_faces))
+        body = (outfit.body_vertices, outfit.body_faces) if spec.include_body else None
+        layers = glb_layers(garments, self.models.catalog, body)
         report = dict(outfit.report)
         report["numerical_fallback"] = flagged
         report["garments_served"] = [g for g, _, _ in garments]

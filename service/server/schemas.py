@@ -143,6 +143,14 @@ class ErrorResponse(BaseModel):
     errors: list[FieldError] | None = Field(default=None, description="Per-field problems (4xx on input).")
 
 
+class GarmentMaterial(BaseModel):
+    base_color: list[float] = Field(description="glTF base colour factor RGBA in [0, 1], times the texture.")
+    roughness: float = Field(description="glTF roughness factor.")
+    textures: dict[str, str] = Field(
+        description="Texture file per slot (`base_color`, `normal`); embedded in every outfit GLB."
+    )
+
+
 class GarmentSummary(BaseModel):
     model_config = ConfigDict(
         json_schema_extra={
@@ -153,7 +161,12 @@ class GarmentSummary(BaseModel):
                 "layer_rank": 1,
                 "vertices": 5210,
                 "faces": 10128,
-                "openings": ["left_sleeve", "neck", "right_sleeve", "waist"],
+                "openings": ["hem", "neck", "sleeve_l", "sleeve_r"],
+                "material": {
+                    "base_color": [1.0, 1.0, 1.0, 1.0],
+                    "roughness": 0.9,
+                    "textures": {"base_color": "tshirt.base.png", "normal": "tshirt.normal.png"},
+                },
             }
         }
     )
@@ -165,6 +178,9 @@ class GarmentSummary(BaseModel):
     vertices: int = Field(description="Vertex count of the rest mesh.")
     faces: int = Field(description="Triangle count of the rest mesh.")
     openings: list[str] = Field(description="Names of the garment's openings (boundary loops), sorted.")
+    material: GarmentMaterial | None = Field(
+        default=None, description="How it looks in the GLB (UVs and textures); null: a flat colour."
+    )
 
 
 class GarmentList(BaseModel):

@@ -137,3 +137,34 @@ def test_failing_untangling_falls_back_and_is_flagged(app, monkeypatch):
     monkeypatch.setattr(service.pipeline.outfit, "make_outfit", failing)
     result = app.state.tryon.engine.make(OutfitSpec(("shorts",), untangle=True))
     assert result.report["numerical_fallback"] == ["shorts"] and result.glb[:4] == b"glTF"
+
+
+def test_every_garment_node_is_textured_and_the_catalog_says_how(client: TestClient):
+    """Each garment in the GLB has TEXCOORD_0 from its display mesh and its material's PNG textures,
+    embedded; ``GET /v1/garments`` names the material's texture files."""
+    import json
+    import struct
+
+    from service.pipeline.catalog import load_catalog
+
+    catalog = load_catalog()
+    listed = {g["id"]: g["material"] for g in client.get("/v1/garments").json()["garments"]}
+    assert listed == {gid: g.material.summary() for gid, g in catalog.items()}
+    assert all(m["textures"] == {"base_color": f"{gid}.base.png", "normal": f"{gid}.normal.png"}
+               for gid, m in listed.items())  # fmt: skip
+    request = {"garments": ["pants", "tshirt"], "options": FAST}
+    data = client.post("/v1/outfits", json=request, headers={"Accept": GLB}).content
+    (n,) = struct.unpack("<I", data[12:16])
+    doc = json.loads(data[20 : 20 + n])
+    binary = data[20 + n + 8 :]
+    meshes = {m["name"]: m["primitives"][0] for m in doc["meshes"]}
+    assert "TEXCOORD_0" not in meshes["body"]["attributes"]
+    for gid in ("pants", "tshirt"):
+        primitive, display = meshes[gid], catalog[gid].display
+        assert doc["accessors"][primitive["attributes"]["TEXCOORD_0"]]["count"] == len(display.uv)
+        material = doc["materials"][primitive["material"]]
+        texture = doc["textures"][material["pbrMetallicRoughness"]["baseColorTexture"]["index"]]
+        image = doc["images"][texture["source"]]
+        view = doc["bufferViews"][image["bufferView"]]
+        png = binary[view["byteOffset"] : view["byteOffset"] + view["byteLength"]]
+        assert png == catalog[gid].material.textures["base_color"]

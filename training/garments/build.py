@@ -6,7 +6,6 @@ signed-distance grid is cached under ``data/cache`` (delete it to rebuild from s
 
 from __future__ import annotations
 
-import json
 import time
 from pathlib import Path
 
@@ -16,6 +15,7 @@ from service.geometry.mesh import boundary_loops, vertex_normals
 from service.pipeline.body import DEFAULT_BETA, BodyModel
 from service.pipeline.catalog import Garment, save_garment
 from service.process.paths import REPO_ROOT, models_dir
+from training.garments.appearance import FABRICS, dress, write_catalog
 from training.garments.cut import clip_mesh, compact, component_near
 from training.garments.sdf import SurfaceDistance, sample_grid
 from training.garments.specs import CATALOG, Cut, GarmentSpec, NeckCut, SkirtSpec
@@ -257,14 +257,11 @@ def build_catalog(out_dir: Path | None = None, ids: list[str] | None = None) -> 
             g = build_skirt(spec, vertices, lower_body, distance)
         else:
             g = build_cut_garment(spec, grid, joints, distance)
-        g = orient_outward(g, distance)
+        g = dress(orient_outward(g, distance), body, FABRICS[g.id])
         save_garment(out_dir, g)
         garments.append(g)
         print(f"{g.id:12s} {len(g.vertices):6d} vertices {len(g.faces):6d} faces "
               f"openings {sorted(g.openings)} ({time.time() - t0:.1f} s)")
     if not ids:
-        index = {"garments": [
-            {"id": s.id, "name": s.name, "category": s.category, "layer_rank": s.layer_rank,
-             "file": f"{s.id}.npz"} for s in CATALOG]}
-        (out_dir / "catalog.json").write_text(json.dumps(index, indent=2) + "\n")
+        write_catalog(out_dir, garments)
     return garments
