@@ -15,6 +15,7 @@ npz contents:
     corner_vertices (2, 2, 3, V, 3) float32  rest vertices at (gender, height, weight) anchors
     anchors_gender (2,), anchors_height (2,), anchors_weight (3,) float64
     faces (F, 3) int32                       watertight, outward oriented
+    uv (T, 2) float32, face_uv (F, 3) int32   Anny's texture coordinates (origin bottom left), per corner
     regions (V,) uint8, region_names (R,) str  coarse body part of each vertex
     bone_names (J,) str, bone_heads (J, 3) float64  joint positions at DEFAULT_BETA
     beta_labels (3,) str, fixed_phenotype_names (P,) str, fixed_phenotype_values (P,) float64,
@@ -113,6 +114,9 @@ def build_arrays() -> dict[str, np.ndarray]:
         "anchors_height": anchors[1],
         "anchors_weight": anchors[2],
         "faces": anny_faces().astype(np.int32),
+        # Anny's texture coordinates (OBJ convention: origin bottom left) and, per face corner, which.
+        "uv": model.texture_coordinates.detach().numpy().astype(np.float32),
+        "face_uv": model.face_texture_coordinate_indices.detach().numpy().astype(np.int32),
         "regions": region_labels(dominant_bone(), bones),
         "region_names": np.array(REGION_NAMES),
         "bone_names": np.array(bones),

@@ -1,4 +1,4 @@
-"""The ``ulnef`` command line: ``serve``, ``garments``, ``outfit``, ``openapi``."""
+"""The ``ulnef`` command line: ``serve``, ``garments``, ``outfit``, ``avatar``, ``openapi``."""
 
 from __future__ import annotations
 
@@ -99,6 +99,39 @@ def cmd_outfit(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_avatar(args: argparse.Namespace) -> int:
+    """Write the avatar a shop drapes its garments on (GLB or OBJ) and its measurements as JSON."""
+    from service.pipeline.appearance import Material
+    from service.pipeline.avatar import SKIN, avatar_info, avatar_obj, mean_avatar
+    from service.pipeline.body import BodyModel
+    from service.pipeline.gltf import GltfLayer, outfit_glb
+
+    out = Path(args.output)
+    suffix = out.suffix.lower()
+    if suffix not in (".glb", ".obj"):
+        print(f"ulnef avatar: {out}: the file must end in .glb or .obj", file=sys.stderr)
+        return 2
+    if suffix == ".glb" and args.units != "m":
+        print(f"ulnef avatar: {out}: glTF is in metres by definition; write .obj for --units {args.units}",
+              file=sys.stderr)  # fmt: skip
+        return 2
+    avatar = mean_avatar(BodyModel.load())
+    info = avatar_info(avatar, args.units, out.name)
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        if suffix == ".glb":
+            layer = GltfLayer("avatar", avatar.vertices, avatar.faces, avatar.display, Material(SKIN, 0.8))
+            out.write_bytes(outfit_glb([layer]))
+        else:
+            out.write_text(avatar_obj(avatar, args.units))
+        out.with_suffix(".json").write_text(json.dumps(info, indent=2) + "\n")
+    except OSError as e:
+        print(f"ulnef avatar: cannot write {out}: {e.strerror}", file=sys.stderr)
+        return 2
+    print(json.dumps(info, indent=2))
+    return 0
+
+
 def cmd_openapi(args: argparse.Namespace) -> int:
     text = render_openapi()
     if args.output == "-":
@@ -133,6 +166,11 @@ def build_parser() -> argparse.ArgumentParser:
     outfit.add_argument("--threads", type=int, default=2, help="onnxruntime threads (default: %(default)s)")
     outfit.add_argument("-o", "--output", default="outfit.glb", help="GLB path (default: %(default)s)")
     outfit.set_defaults(func=cmd_outfit)
+
+    avatar = sub.add_parser("avatar", help="write the avatar to drape garments on (GLB or OBJ) and its JSON")
+    avatar.add_argument("-o", "--output", default="avatar.glb", help=".glb or .obj (default: %(default)s)")
+    avatar.add_argument("--units", choices=("m", "cm", "mm"), default="m", help="(default: %(default)s)")
+    avatar.set_defaults(func=cmd_avatar)
 
     openapi = sub.add_parser("openapi", help="write the HTTP API's OpenAPI schema as YAML")
     openapi.add_argument("-o", "--output", default="-", help="output file, '-' for stdout (default: stdout)")

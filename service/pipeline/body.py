@@ -48,6 +48,7 @@ from pathlib import Path
 import numpy as np
 
 from service.geometry.mesh import check_mesh, signed_volume
+from service.pipeline.appearance import DisplayMesh
 from service.process.paths import models_dir
 
 BETA_LABELS = ("gender", "height", "weight")
@@ -217,6 +218,19 @@ def body_measurements(vertices: np.ndarray, faces: np.ndarray) -> tuple[float, f
     return float(z.max() - z.min()), volume * BODY_DENSITY_KG_M3
 
 
+def display_mesh(faces: np.ndarray, face_uv: np.ndarray, uv: np.ndarray) -> DisplayMesh:
+    """The display mesh of per-corner texture coordinates: ``faces (F, 3)`` vertex and ``face_uv (F, 3)``
+    texture-coordinate indices into ``uv (T, 2)`` (OBJ convention, origin bottom left); one display
+    vertex per distinct (vertex, texture coordinate) pair, UVs flipped to glTF's (origin top left)."""
+    key = faces.reshape(-1).astype(np.int64) * len(uv) + face_uv.reshape(-1)
+    _, first, inverse = np.unique(key, return_index=True, return_inverse=True)
+    corner_uv = uv[face_uv.reshape(-1)[first]].astype(np.float32)
+    flipped = np.stack([corner_uv[:, 0], 1.0 - corner_uv[:, 1]], axis=1)
+    display = DisplayMesh(faces.reshape(-1)[first].astype(np.int64), flipped, inverse.reshape(faces.shape))
+    display.check(int(faces.max()) + 1, faces)
+    return display
+
+
 def check_betas(betas: np.ndarray, batched: bool = True) -> np.ndarray:
     """Return betas as float64, raising ValueError unless ``(B, 3)`` (or ``(3,)`` when not
     batched), finite and within Anny's [0, 1]."""
@@ -246,6 +260,7 @@ class BodyModel:
     faces: (F, 3) int64, watertight and outward oriented.
     regions: (V,) uint8 index into ``region_names`` (body part of the strongest skinning bone).
     bone_names, bone_heads: (J,) names and (J, 3) float64 joint positions at ``DEFAULT_BETA``.
+    display: Anny's UVs as a display mesh over ``faces`` (None in a file exported without them).
     metadata: fixed phenotypes, topology and Anny version the file was exported with.
     """
 
@@ -257,6 +272,7 @@ class BodyModel:
     bone_names: tuple[str, ...] = field(repr=False)
     bone_heads: np.ndarray = field(repr=False)
     metadata: dict = field(default_factory=dict)
+    display: DisplayMesh | None = field(default=None, repr=False)
     extreme_z: np.ndarray = field(init=False, repr=False)  # (C, K) z of the possible extremes
     volume_tensor: np.ndarray = field(init=False, repr=False)  # (C, C, C)
 
@@ -300,6 +316,7 @@ class BodyModel:
             bone_names=tuple(data["bone_names"].tolist()),
             bone_heads=data["bone_heads"].astype(np.float64),
             metadata=metadata,
+            display=display_mesh(faces, data["face_uv"], data["uv"]) if "uv" in data else None,
         )
 
     @property

@@ -80,3 +80,12 @@ def test_a_textured_glb_has_no_validator_errors(tmp_path: Path):
     path.write_bytes(outfit_glb(layers))
     report = validate([path])[str(path)]
     assert report["numErrors"] == 0, report["errors"]
+
+
+def test_the_avatar_glb_has_no_validator_errors(tmp_path: Path):
+    from service.cli import main
+
+    path = tmp_path / "avatar.glb"
+    assert main(["avatar", "-o", str(path)]) == 0
+    report = validate([path])[str(path)]
+    assert report["numErrors"] == 0, report["errors"]
