@@ -40,6 +40,7 @@ def test_garments_json_matches_http_body(models_env: Path, capsys: pytest.Captur
         "vertices": 4,
         "faces": 2,
         "openings": ["neck", "waist"],
+        "material": None,
     }
 
 

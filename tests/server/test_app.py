@@ -24,6 +24,7 @@ TSHIRT = {
     "vertices": 4,
     "faces": 2,
     "openings": ["neck", "waist"],
+    "material": None,
 }
 PANTS = {
     "id": "pants",
@@ -33,6 +34,7 @@ PANTS = {
     "vertices": 3,
     "faces": 1,
     "openings": ["waist"],
+    "material": None,
 }
 
 
