@@ -81,11 +81,12 @@ def cmd_garments(args: argparse.Namespace) -> int:
 def cmd_outfit(args: argparse.Namespace) -> int:
     """Dress a body, write the GLB, print the quality report as JSON."""
     from service.pipeline.body import ShapeOutOfRange, shape_from_measurements
+    from service.pipeline.catalog import verified_imports
     from service.pipeline.gltf import outfit_glb
     from service.pipeline.outfit import OutfitModels, make_outfit
     from service.pipeline.tryon import glb_layers
 
-    models = OutfitModels.load(threads=args.threads)
+    models = OutfitModels.load(threads=args.threads, imported=verified_imports(Settings().garments_dir)[0])
     ids = [g for g in args.garments.split(",") if g]
     try:
         beta = shape_from_measurements(models.body, args.gender, args.height_cm, args.weight_kg)
@@ -151,7 +152,9 @@ def build_parser() -> argparse.ArgumentParser:
     serve.add_argument("--port", type=int, default=defaults.port, help="port (default: %(default)s)")
     serve.set_defaults(func=cmd_serve)
 
-    garments = sub.add_parser("garments", help="list the garment catalog")
+    garments = sub.add_parser(
+        "garments", help="list the garment catalog; `ulnef garments import FILE ...` adds one (--help there)"
+    )
     garments.add_argument("--json", action="store_true", help="print JSON, as GET /v1/garments answers")
     garments.set_defaults(func=cmd_garments)
 
@@ -178,7 +181,23 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def garments_import(argv: list[str]) -> int:
+    """``ulnef garments import ...``: the offline pipeline, in its own process. It needs the training
+    extra (torch, anny), which the serving image leaves out; the service never imports it."""
+    import importlib.util
+    import subprocess
+
+    if importlib.util.find_spec("torch") is None or importlib.util.find_spec("training") is None:
+        print("ulnef garments import: needs the training extra: pip install -e '.[train]' (torch==2.13.0 "
+              "first, as the Makefile does); the serving image leaves it out", file=sys.stderr)
+        return 2
+    return subprocess.run([sys.executable, "-m", "training.garment_import", *argv], check=False).returncode
+
+
 def main(argv: Sequence[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv[:2] == ["garments", "import"]:
+        return garments_import(argv[2:])
     args = build_parser().parse_args(argv)
     return args.func(args)
 

@@ -41,6 +41,7 @@ def test_garments_json_matches_http_body(models_env: Path, capsys: pytest.Captur
         "faces": 2,
         "openings": ["neck", "waist"],
         "material": None,
+        "origin": "bundled",
     }
 
 

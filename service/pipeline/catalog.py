@@ -20,9 +20,11 @@ from typing import Literal
 import numpy as np
 
 from service.pipeline.appearance import DisplayMesh, Material
+from service.process.manifest import verify_manifest
 from service.process.paths import models_dir
 
-Category = Literal["top", "bottom"]
+Category = Literal["top", "bottom", "dress"]
+Origin = Literal["bundled", "imported"]
 
 
 @dataclass(frozen=True)
@@ -42,6 +44,7 @@ class Garment:
     openings: dict[str, np.ndarray] = field(default_factory=dict)
     display: DisplayMesh | None = None
     material: Material | None = None
+    origin: Origin = "bundled"
 
     def summary(self) -> dict:
         return {
@@ -53,6 +56,7 @@ class Garment:
             "faces": int(len(self.faces)),
             "openings": sorted(self.openings),
             "material": None if self.material is None else self.material.summary(),
+            "origin": self.origin,
         }
 
     def catalog_entry(self) -> dict:
@@ -87,7 +91,7 @@ def save_garment(directory: Path, garment: Garment) -> Path:
     return path
 
 
-def load_garment(directory: Path, entry: dict) -> Garment:
+def load_garment(directory: Path, entry: dict, origin: Origin = "bundled") -> Garment:
     with np.load(directory / entry["file"]) as data:
         prefix = "opening_"
         openings = {k[len(prefix) :]: data[k].astype(np.int64) for k in data.files if k.startswith(prefix)}
@@ -106,6 +110,7 @@ def load_garment(directory: Path, entry: dict) -> Garment:
             openings=openings,
             display=display,
             material=_load_material(directory, entry.get("material")),
+            origin=origin,
         )
 
 
@@ -121,9 +126,39 @@ def _load_material(directory: Path, spec: dict | None) -> Material | None:
     )
 
 
-@lru_cache(maxsize=4)
-def load_catalog(directory: Path | None = None) -> dict[str, Garment]:
+@lru_cache(maxsize=16)
+def load_catalog(directory: Path | None = None, origin: Origin = "bundled") -> dict[str, Garment]:
     """All garments by id, in catalog order (inner to outer default ranks)."""
     directory = Path(directory) if directory is not None else models_dir() / "garments"
     index = json.loads((directory / "catalog.json").read_text())
-    return {e["id"]: load_garment(directory, e) for e in index["garments"]}
+    return {e["id"]: load_garment(directory, e, origin) for e in index["garments"]}
+
+
+def imported_garment_dirs(garments_dir: Path | None) -> list[Path]:
+    """The published imports in ``garments_dir`` (``<id>/`` with a manifest), by id; none for None.
+    Staging work (``.staging/``) and anything without a manifest is not a garment yet."""
+    if garments_dir is None or not Path(garments_dir).is_dir():
+        return []
+    published = (p for p in Path(garments_dir).iterdir() if p.is_dir() and not p.name.startswith("."))
+    return sorted(p for p in published if (p / "manifest.json").is_file())
+
+
+def verified_imports(garments_dir: Path | None) -> tuple[list[Path], dict[str, list[str]]]:
+    """(imports whose files match their manifest, {id: problems} of those that do not)."""
+    good, bad = [], {}
+    for directory in imported_garment_dirs(garments_dir):
+        problems = verify_manifest(directory)
+        if problems:
+            bad[directory.name] = problems
+        else:
+            good.append(directory)
+    return good, bad
+
+
+def full_catalog(bundled_dir: Path | None, garments_dir: Path | None) -> dict[str, Garment]:
+    """The bundled catalog, then every verified import's garments (an id already taken is skipped)."""
+    catalog = dict(load_catalog(bundled_dir))
+    for directory in verified_imports(garments_dir)[0]:
+        for gid, garment in load_catalog(directory / "garments", origin="imported").items():
+            catalog.setdefault(gid, garment)
+    return catalog

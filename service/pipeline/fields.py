@@ -96,8 +96,20 @@ class FieldSet:
 
     def __init__(self, directory: Path | None = None, threads: int = 2):
         directory = Path(directory or default_directory())
+        self.threads = threads
         self.config = json.loads((directory / CONFIG_FILE).read_text())
         self.fields = {fid: NeuralField(fid, directory, threads) for fid in self.config["fields"]}
+
+    def add(self, directory: Path) -> list[str]:
+        """Also serve the fields of ``directory`` (an imported garment's); returns their ids. An id
+        already served is refused: an import never replaces a field."""
+        config = json.loads((Path(directory) / CONFIG_FILE).read_text())
+        taken = sorted(set(config["fields"]) & set(self.fields))
+        if taken:
+            raise ValueError(f"{directory}: fields {taken} are already served")
+        self.config["fields"] |= config["fields"]
+        self.fields |= {fid: NeuralField(fid, Path(directory), self.threads) for fid in config["fields"]}
+        return list(config["fields"])
 
     def __call__(self, field_id: str, x: np.ndarray, beta: np.ndarray, gradient: bool = False) -> FieldValues:
         out = self.fields[field_id](x, beta, gradient)

@@ -70,17 +70,29 @@ class OutfitModels:
         return signed_distance(self.space.closest, x)
 
     @classmethod
-    def load(cls, directory: Path | None = None, threads: int = 2) -> OutfitModels:
+    def load(cls, directory: Path | None = None, threads: int = 2, imported: list[Path] = ()) -> OutfitModels:
+        """The models of ``directory`` (default ``models_dir()``) plus the garments of each
+        ``imported`` directory (``garments/``, ``explicit/``, ``fields/``: an imported garment's,
+        ``service.pipeline.catalog.imported_garment_dirs``)."""
         from service.process.paths import models_dir
         from service.process.tuning import tune_process
 
         tune_process()
         directory = Path(directory or models_dir())
         body = BodyModel.load(directory / "body" / "anny_shape.npz")
-        catalog = load_catalog(directory / "garments")
+        catalog = dict(load_catalog(directory / "garments"))
         explicit = {gid: ExplicitOnnx(gid, directory / "explicit") for gid in catalog}
+        fields = FieldSet(directory / "fields", threads)
+        for extra in imported:
+            garments = load_catalog(Path(extra) / "garments", origin="imported")
+            taken = sorted(set(garments) & set(catalog))
+            if taken:
+                raise ValueError(f"{extra}: garment ids {taken} are already in the catalog")
+            catalog |= garments
+            explicit |= {gid: ExplicitOnnx(gid, Path(extra) / "explicit") for gid in garments}
+            fields.add(Path(extra) / "fields")
         return cls(
-            body, catalog, explicit, FieldSet(directory / "fields", threads),
+            body, catalog, explicit, fields,
             NeuralUntangler(directory / "untangler", threads),
             CanonicalSpace.build(body.vertices(np.asarray(DEFAULT_BETA)), body.faces, threads),
             SdfGrid.load(sdf) if (sdf := directory / "body" / "mean_sdf.npz").exists() else None,

@@ -142,10 +142,16 @@ class ModelEngine:
         self.model_version = version
 
     @classmethod
-    def load(cls, models_dir: Path, threads: int) -> ModelEngine:
+    def load(cls, models_dir: Path, threads: int, imported: list[Path] = ()) -> ModelEngine:
+        """The engine over ``models_dir`` and the ``imported`` garment directories; the version
+        covers both (an import changes outfit ids)."""
         from service.pipeline.outfit import OutfitModels
 
-        return cls(OutfitModels.load(models_dir, threads=threads), model_version(models_dir))
+        version = model_version(models_dir)
+        if imported:
+            manifests = "".join(model_version(d) for d in imported)
+            version = hashlib.sha256((version + manifests).encode()).hexdigest()[:12]
+        return cls(OutfitModels.load(models_dir, threads=threads, imported=imported), version)
 
     def garment_ids(self) -> list[str]:
         return list(self.models.catalog)

@@ -14,6 +14,7 @@ import time
 from collections.abc import Callable
 from concurrent.futures import Future
 
+from service.pipeline.catalog import verified_imports
 from service.pipeline.tryon import Engine, ModelEngine, OutfitResult, OutfitSpec, self_test
 from service.process.manifest import MANIFEST_NAME, REFRESH_COMMAND, verify_manifest
 from service.server.cache import OutfitCache
@@ -48,7 +49,12 @@ def check_models(settings: Settings) -> None:
 
 
 def load_engine(settings: Settings) -> Engine:
-    return ModelEngine.load(settings.resolved_models_dir(), settings.onnx_threads)
+    """The models, and the imported garments whose files match their manifests (the others are
+    logged and left out: a half-copied import must not take the service down)."""
+    imported, broken = verified_imports(settings.garments_dir)
+    for gid, problems in broken.items():
+        log.error("imported garment %s left out: %s", gid, "; ".join(problems))
+    return ModelEngine.load(settings.resolved_models_dir(), settings.onnx_threads, imported)
 
 
 class TryOn:

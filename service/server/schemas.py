@@ -173,11 +173,14 @@ class GarmentSummary(BaseModel):
 
     id: str = Field(description="Garment id, as used in outfit requests.")
     name: str = Field(description="Human-readable name.")
-    category: Category = Field(description="`top` or `bottom`.")
+    category: Category = Field(description="`top`, `bottom` or `dress`.")
     layer_rank: int = Field(description="Default stacking rank in its category; lower is nearer the body.")
     vertices: int = Field(description="Vertex count of the rest mesh.")
     faces: int = Field(description="Triangle count of the rest mesh.")
     openings: list[str] = Field(description="Names of the garment's openings (boundary loops), sorted.")
+    origin: Literal["bundled", "imported"] = Field(
+        default="bundled", description="`bundled` with the service, or `imported` by `ulnef garments import`."
+    )
     material: GarmentMaterial | None = Field(
         default=None, description="How it looks in the GLB (UVs and textures); null: a flat colour."
     )

@@ -61,8 +61,13 @@ class Settings(BaseSettings):
     cache_entries: int = Field(default=64, ge=0, description="Recent outfits kept (LRU); 0 disables.")
     cache_bytes: int = Field(default=256 * 2**20, ge=0, description="Byte budget of the outfit cache.")
 
-    def garments_dir(self) -> Path | None:
-        """Catalog directory, or None to let ``service.pipeline.catalog`` use
+    garments_dir: Path | None = Field(
+        default=None,
+        description="Imported garments (`ulnef garments import`), served beside the bundled ones.",
+    )
+
+    def catalog_dir(self) -> Path | None:
+        """Bundled catalog directory, or None to let ``service.pipeline.catalog`` use
         ``service.process.paths.models_dir()``."""
         return self.models_dir / "garments" if self.models_dir is not None else None
 

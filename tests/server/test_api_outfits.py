@@ -29,7 +29,7 @@ def make_app(models_dir: Path, delay: float = 0.0, crossings: int = 0, **overrid
     engine = {}
 
     def factory(settings: Settings) -> FakeEngine:
-        engine["it"] = FakeEngine(load_catalog(settings.garments_dir()), delay=delay, crossings=crossings)
+        engine["it"] = FakeEngine(load_catalog(settings.catalog_dir()), delay=delay, crossings=crossings)
         return engine["it"]
 
     app = create_app(Settings(**(values | overrides)), factory)

@@ -25,6 +25,7 @@ TSHIRT = {
     "faces": 2,
     "openings": ["neck", "waist"],
     "material": None,
+    "origin": "bundled",
 }
 PANTS = {
     "id": "pants",
@@ -35,6 +36,7 @@ PANTS = {
     "faces": 1,
     "openings": ["waist"],
     "material": None,
+    "origin": "bundled",
 }
 
 
@@ -45,7 +47,7 @@ def fake_settings(models_dir: Path, **overrides) -> Settings:
 
 
 def fake_factory(settings: Settings) -> FakeEngine:
-    return FakeEngine(load_catalog(settings.garments_dir()))
+    return FakeEngine(load_catalog(settings.catalog_dir()))
 
 
 @pytest.fixture

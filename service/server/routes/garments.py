@@ -8,7 +8,7 @@ from typing import Annotated
 
 from fastapi import APIRouter, Depends, HTTPException
 
-from service.pipeline.catalog import Garment, load_catalog
+from service.pipeline.catalog import Garment, full_catalog
 from service.server.routes.deps import SettingsDep
 from service.server.schemas import ErrorResponse, GarmentList, GarmentSummary
 from service.server.settings import Settings
@@ -23,7 +23,7 @@ router = APIRouter(prefix="/v1", tags=["garments"])
 
 def try_load_catalog(settings: Settings) -> dict[str, Garment] | None:
     try:
-        return load_catalog(settings.garments_dir())
+        return full_catalog(settings.catalog_dir(), settings.garments_dir)
     except CATALOG_ERRORS as e:
         log.warning("%s: %s", CATALOG_NOT_LOADED, e)
         return None

@@ -1,0 +1,72 @@
+"""python -m training.garment_import FILE --id ID --name NAME --category top|bottom|dress ...
+
+What ``ulnef garments import`` runs (it needs the training extra: torch, anny). Exit status 0 when
+the garment is published, 2 for a file or argument the import cannot use (the message names the
+file, the problem and the fix), 1 when an offline step failed (rerun to resume), 130 when
+interrupted (rerun to resume).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import re
+import sys
+from pathlib import Path
+
+from service.pipeline.catalog import load_catalog
+from training.garment_import.pipeline import GarmentSpec, ImportSettings, import_garment
+from training.garment_import.read import GarmentFileError
+
+ID_PATTERN = re.compile(r"[a-z][a-z0-9_]{0,39}")
+
+
+def parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="ulnef garments import", description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)  # fmt: skip
+    p.add_argument("file", type=Path, help="OBJ (+ MTL, textures) or glTF/GLB, draped on the avatar")
+    p.add_argument("--id", required=True, help="catalog id: lower case letters, digits, _")
+    p.add_argument("--name", required=True, help="name shown to shoppers")
+    p.add_argument("--category", required=True, choices=("top", "bottom", "dress"))
+    p.add_argument("--layer-rank", type=int, default=3, help="default stacking rank (default: %(default)s)")
+    p.add_argument("--units", choices=("m", "cm", "mm"), default="m", help="(default: %(default)s)")
+    p.add_argument("--models", type=Path, default=None,
+                   help="garments directory to publish into (default: ULNEF_GARMENTS_DIR)")  # fmt: skip
+    s = ImportSettings()
+    p.add_argument("--train-shapes", type=int, default=s.train_shapes, help="(default: %(default)s)")
+    p.add_argument("--test-shapes", type=int, default=s.test_shapes, help="(default: %(default)s)")
+    p.add_argument("--field-steps", type=int, default=s.field_steps, help="(default: %(default)s)")
+    p.add_argument("--workers", type=int, default=s.workers, help="processes (default: %(default)s)")
+    return p
+
+
+def main(argv=None) -> int:
+    args = parser().parse_args(argv)
+    directory = args.models or (Path(os.environ["ULNEF_GARMENTS_DIR"]) if os.environ.get("ULNEF_GARMENTS_DIR")
+                                else None)  # fmt: skip
+    fail = lambda message: print(f"ulnef garments import: {message}", file=sys.stderr) or 2  # noqa: E731
+    if directory is None:
+        return fail("no garments directory: pass --models DIR or set ULNEF_GARMENTS_DIR")
+    if not ID_PATTERN.fullmatch(args.id):
+        return fail(f"--id {args.id!r}: use 1-40 lower case letters, digits and _, starting with a letter")
+    if args.id in load_catalog() or (directory / args.id).exists():
+        return fail(f"--id {args.id!r} is already in the catalog: choose another id")
+    if min(args.train_shapes, args.test_shapes, args.field_steps, args.workers) < 1:
+        return fail("--train-shapes, --test-shapes, --field-steps and --workers must be at least 1")
+    spec = GarmentSpec(args.id, args.name, args.category, args.layer_rank, args.units)
+    settings = ImportSettings(args.train_shapes, args.test_shapes, args.field_steps, args.workers)
+    try:
+        import_garment(args.file, spec, directory, settings)
+    except GarmentFileError as e:
+        return fail(str(e))
+    except RuntimeError as e:
+        print(f"ulnef garments import: {e}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print("ulnef garments import: interrupted; rerun the same command to resume", file=sys.stderr)
+        return 130
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
