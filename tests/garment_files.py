@@ -1,6 +1,7 @@
 """Garment files made the way a shop's design tool would hand them over, by a method that is not
 ``training/garments`` (not an offset of the body): a skirt swept as a tube of rings, each an ellipse
-around the avatar's cross-section at that height plus an ease, never narrowing going down; its
+around the avatar's cross-section at that height plus an ease that grows from a snug waistband to a
+loose hem, never narrowing going down; its
 texture seam runs down the back, so the file's vertices are split there (OBJ by its ``vt``, GLB by
 duplicated vertices), written in the avatar's frame (Y up, feet on y = 0) in the unit asked for.
 
@@ -19,7 +20,7 @@ from service.pipeline.body import DEFAULT_BETA, BodyModel
 from service.pipeline.gltf import ANNY_TO_GLTF
 
 
-def skirt_tube(body: BodyModel, edge: float = 0.012, ease: float = 0.03, length: float = 0.45):
+def skirt_tube(body: BodyModel, edge: float = 0.012, ease: tuple[float, float] = (0.008, 0.04), length=0.45):
     """(vertices (V, 3) Anny frame, faces (F, 3), uv (V, 2) v up) of a tube from the waist down,
     ``edge`` m between neighbours, the seam column doubled at the back (angle pi)."""
     mean = body.vertices(np.asarray(DEFAULT_BETA))
@@ -30,9 +31,10 @@ def skirt_tube(body: BodyModel, edge: float = 0.012, ease: float = 0.03, length:
     faces = body.faces[~arms[body.faces].any(1)]
     zs = top - np.arange(0.0, length + 1e-9, edge)
     half = []
-    for z in zs:
+    for k, z in enumerate(zs):
         xy = cross_section(mean, faces, z)
-        half.append(np.abs(xy - [0.0, bones["spine03"][1]]).max(0) + ease)
+        grow = ease[0] + (ease[1] - ease[0]) * k / max(len(zs) - 1, 1)
+        half.append(np.abs(xy - [0.0, bones["spine03"][1]]).max(0) + grow)
     half = np.maximum.accumulate(np.array(half), axis=0)  # never narrower below
     circumference = np.pi * half.sum(1).max()  # ~ ellipse perimeter
     n = int(np.ceil(circumference / edge))

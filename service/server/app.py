@@ -3,6 +3,9 @@ shutdown."""
 
 from __future__ import annotations
 
+import asyncio
+import signal
+import threading
 from contextlib import asynccontextmanager
 from importlib.metadata import PackageNotFoundError, version
 
@@ -12,12 +15,21 @@ from fastapi.routing import APIRoute
 
 from service.server import errors, logs
 from service.server.middleware import AccessLog, BodyLimit
-from service.server.routes import garments, outfits, page, probes
+from service.server.routes import admin, garments, outfits, page, probes
 from service.server.routes.garments import CATALOG_NOT_LOADED, try_load_catalog
 from service.server.runtime import EngineFactory, TryOn, load_engine
 from service.server.settings import Settings
 
 __all__ = ["CATALOG_NOT_LOADED", "create_app", "try_load_catalog"]
+
+
+def _reload_on_sighup(tryon: TryOn) -> None:
+    """``kill -HUP`` reloads the models on a thread (where the loop can take signals: not in tests)."""
+    try:
+        loop = asyncio.get_running_loop()
+        loop.add_signal_handler(signal.SIGHUP, lambda: threading.Thread(target=tryon.reload_logged).start())
+    except (NotImplementedError, RuntimeError, ValueError, AttributeError):
+        pass
 
 
 def package_version() -> str:
@@ -43,6 +55,7 @@ def create_app(settings: Settings | None = None, engine_factory: EngineFactory =
         if settings.configure_logging:
             logs.configure(settings.log_level, settings.log_format)
         tryon.start()
+        _reload_on_sighup(tryon)
         yield
         tryon.stop()
 
@@ -73,6 +86,7 @@ def create_app(settings: Settings | None = None, engine_factory: EngineFactory =
     app.include_router(probes.router)
     app.include_router(garments.router)
     app.include_router(outfits.router)
+    app.include_router(admin.router)
     app.include_router(page.router)
     app.mount("/static", page.static_files(), name="static")
     return app

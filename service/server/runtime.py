@@ -31,6 +31,10 @@ class ModelIntegrityError(RuntimeError):
     """The models directory does not match its manifest."""
 
 
+class ReloadBusy(Exception):
+    """Another reload is running."""
+
+
 class NotReady(Exception):
     """Models not loaded, or the self-test has not passed (``detail`` says which)."""
 
@@ -70,6 +74,7 @@ class TryOn:
         self._inflight: dict[str, Future[OutfitResult]] = {}
         self._inflight_lock = threading.Lock()
         self._loader: threading.Thread | None = None
+        self._reloading = threading.Lock()
 
     # ------------------------------------------------------------ start-up
 
@@ -97,6 +102,39 @@ class TryOn:
         self.ready, self.detail = True, "ok"
         self.metrics.ready.set(1)
         log.info("ready in %.1f s (model version %s)", time.perf_counter() - t0, engine.model_version)
+
+    def reload(self) -> dict:
+        """Load the models and the verified imports again (a new import appears), self-test the new
+        engine, then swap it in; requests already running finish on the engine they started with,
+        and outfits of the old model version stay in the cache under their ids. Raises
+        ``ReloadBusy`` while another reload runs; any failure leaves the serving engine as it was."""
+        if not self._reloading.acquire(blocking=False):
+            raise ReloadBusy("a reload is already running")
+        try:
+            if self.settings.verify_models:
+                check_models(self.settings)
+            engine = self.engine_factory(self.settings)
+            if self.settings.self_test_garments:
+                self_test(engine, self.settings.self_test_garments, self.settings.self_test_untangle)
+            before = set(self.engine.garment_ids()) if self.engine is not None else set()
+            self.engine = engine
+            self.ready, self.detail = True, "ok"
+            self.metrics.ready.set(1)
+            after = set(engine.garment_ids())
+            left_out = verified_imports(self.settings.garments_dir)[1]
+            log.info("reloaded: model version %s, %d garments", engine.model_version, len(after))
+            return {"model_version": engine.model_version, "garments": len(after),
+                    "added": sorted(after - before), "removed": sorted(before - after),
+                    "left_out": sorted(left_out)}  # fmt: skip
+        finally:
+            self._reloading.release()
+
+    def reload_logged(self) -> None:
+        """``reload`` for a signal handler: outcome logged, never raised."""
+        try:
+            self.reload()
+        except Exception:  # a failed reload keeps serving what it served
+            log.exception("reload failed; still serving the previous models")
 
     def wait_loaded(self, timeout: float) -> bool:
         """Block until the loader thread ended (tests); True when ready."""

@@ -186,6 +186,14 @@ class GarmentSummary(BaseModel):
     )
 
 
+class ReloadResult(BaseModel):
+    model_version: str = Field(description="Version now served (outfit ids are keyed on it).")
+    garments: int = Field(description="Garments now served.")
+    added: list[str] = Field(description="Garment ids served now that were not before.")
+    removed: list[str] = Field(description="Garment ids no longer served.")
+    left_out: list[str] = Field(description="Imported garments whose files differ from their manifest.")
+
+
 class GarmentList(BaseModel):
     garments: list[GarmentSummary] = Field(description="Every catalog garment, in catalog order.")
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Literal
 
-from pydantic import Field
+from pydantic import Field, SecretStr
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 LogLevel = Literal["critical", "error", "warning", "info", "debug"]
@@ -64,6 +64,11 @@ class Settings(BaseSettings):
     garments_dir: Path | None = Field(
         default=None,
         description="Imported garments (`ulnef garments import`), served beside the bundled ones.",
+    )
+
+    admin_token: SecretStr | None = Field(
+        default=None,
+        description="Bearer token of POST /v1/admin/reload (pick up new imports); unset: no admin endpoint.",
     )
 
     def catalog_dir(self) -> Path | None:

@@ -21,6 +21,7 @@ from tests.garment_files import skirt_tube, welded, write_glb, write_obj, write_
 from training.garment_import.__main__ import main as import_main
 from training.garment_import.openings import name_openings
 from training.garment_import.pipeline import GarmentSpec, prepare
+from training.garment_import.read import read_garment
 
 TINY = ["--train-shapes", "3", "--test-shapes", "2", "--field-steps", "60"]
 
@@ -122,8 +123,7 @@ def test_the_glb_file_imports_the_same_garment(tube, floor, body, tmp_path: Path
     """Validation and reading only (the pipeline is the OBJ's): the GLB gives the same cloth."""
     glb = write_glb(tmp_path / "wrap.glb", *tube, floor=floor)
     obj = write_obj(tmp_path, "wrap", *tube, units="m", floor=floor)
-    a, _ = prepare(glb, GarmentSpec("a", "A", "bottom", 3, "m"), body)
-    b, _ = prepare(obj, GarmentSpec("b", "B", "bottom", 3, "m"), body)
+    a, b = (read_garment(path, "m", floor, gid) for path, gid in ((glb, "a"), (obj, "b")))
     from scipy.spatial import cKDTree
 
     assert len(a.vertices) == len(b.vertices)
@@ -221,7 +221,7 @@ def test_flipped_and_shallow_cloth_are_fixed_and_said(tube, body, floor, tmp_pat
     assert any("flipped" in n for n in notes) and any("pushed out" in n for n in notes)
     mean = body.vertices(np.asarray(DEFAULT_BETA))
     q = ClosestPoint.build(mean, body.faces).query(garment.vertices)
-    assert q.signed.min() >= 0.004 - 1e-9
+    assert q.signed.min() >= 0.004 - 1e-6
     normals = vertex_normals(garment.vertices, garment.faces)
     outward = np.einsum("nd,nd->n", normals, garment.vertices - q.point)
     assert np.mean(outward > 0) > 0.9

@@ -135,16 +135,14 @@ def serve_once(stage: Path, garment_id: str) -> dict:
     return outfit.report
 
 
-def publish(stage: Path, garments_dir: Path, garment_id: str, record: dict) -> Path:
+def publish(stage: Path, garments_dir: Path, garment_id: str, record: dict, log=print) -> Path:
     """Move the finished garment into ``garments_dir`` in one rename, with its manifest and record."""
-    from export.manifest import write_manifest
-
     ready = stage / "publish" / garment_id
     shutil.rmtree(ready.parent, ignore_errors=True)
     for part in ("garments", "explicit", "fields"):
         shutil.copytree(stage / "models" / part, ready / part)
     (ready / IMPORT_RECORD).write_text(json.dumps(record, indent=2) + "\n")
-    write_manifest(ready)
+    _run(["export.manifest", "--models-dir", str(ready)], stage, log)
     final = garments_dir / garment_id
     os.rename(ready, final)  # atomic within one filesystem: the garment appears whole or not at all
     shutil.rmtree(stage, ignore_errors=True)
@@ -196,7 +194,7 @@ def import_garment(
                          "seconds": report["seconds"]["total"]},  # fmt: skip
         "seconds": {k: round(v, 1) for k, v in seconds.items()},
     }
-    final = publish(stage, garments_dir, spec.id, record)
+    final = publish(stage, garments_dir, spec.id, record, log)
     log(f"held-out error: explicit model {explicit_mm:.2f} mm, field f {fields['held_out']['f_mm']:.2f} mm, "
         f"h {fields['held_out']['h_mm']:.2f} mm")  # fmt: skip
     steps = ", ".join(f"{k} {v:.0f} s" for k, v in seconds.items() if k != "total")

@@ -27,6 +27,20 @@ FAR_SHARE = 0.5  # of the vertices that far away: not on the avatar
 EDGE_RANGE = (0.004, 0.03)  # m: mean edge length the simulation is built for (~1.2 cm)
 
 
+def push_out(vertices: np.ndarray, body: ClosestPoint, rounds: int = 5) -> np.ndarray:
+    """``vertices (V, 3)`` with every one closer to the body than ``CLEARANCE`` moved out along its
+    closest face's normal, again where a move near an edge or corner left it short (``rounds`` at
+    most); the result is at least ``CLEARANCE - 1e-6`` from the body."""
+    out = vertices.copy()
+    for _ in range(rounds):
+        q = body.query(out)
+        short = q.signed < CLEARANCE - 1e-6
+        if not short.any():
+            break
+        out[short] = q.point[short] + CLEARANCE * q.normal[short]
+    return out
+
+
 def _where(body: BodyModel, points: np.ndarray) -> str:
     """The body parts nearest to ``points (N, 3)`` on the mean body, most common first."""
     mean = body.vertices(np.asarray(DEFAULT_BETA))
@@ -84,7 +98,8 @@ def fit_to_body(path, garment: SourceGarment, body: BodyModel) -> tuple[SourceGa
     """The garment outward-wound and clear of the mean body, and notes of what was changed."""
     notes = []
     mean = body.vertices(np.asarray(DEFAULT_BETA))
-    q = ClosestPoint.build(mean, body.faces).query(garment.vertices)
+    closest = ClosestPoint.build(mean, body.faces)
+    q = closest.query(garment.vertices)
     far = q.distance > FAR
     if far.mean() > FAR_SHARE:
         problem = f"{100 * far.mean():.0f} % of it is more than {FAR * 100:.0f} cm from the avatar"
@@ -102,8 +117,7 @@ def fit_to_body(path, garment: SourceGarment, body: BodyModel) -> tuple[SourceGa
         raise GarmentFileError(path, problem, "Drape it again so that the cloth rests on the avatar.")
     inside = q.signed < CLEARANCE
     if inside.any():
-        moved = garment.vertices.copy()
-        moved[inside] = q.point[inside] + CLEARANCE * q.normal[inside]
+        moved = push_out(garment.vertices, closest)
         depth = max(0.0, -q.signed.min()) * 1e3
         where = _where(body, garment.vertices[inside])
         notes.append(f"{int(inside.sum())} vertices closer than {CLEARANCE * 1e3:.0f} mm to the body (at "

@@ -9,7 +9,7 @@ from typing import Annotated
 from fastapi import APIRouter, Depends, HTTPException
 
 from service.pipeline.catalog import Garment, full_catalog
-from service.server.routes.deps import SettingsDep
+from service.server.routes.deps import SettingsDep, TryOnDep
 from service.server.schemas import ErrorResponse, GarmentList, GarmentSummary
 from service.server.settings import Settings
 
@@ -29,10 +29,15 @@ def try_load_catalog(settings: Settings) -> dict[str, Garment] | None:
         return None
 
 
-def get_catalog(settings: SettingsDep) -> dict[str, Garment]:
+def get_catalog(settings: SettingsDep, tryon: TryOnDep) -> dict[str, Garment]:
+    """The catalog on disk; once the models are loaded, only what they serve (an import published
+    since start-up appears after a reload, when outfits can use it)."""
     catalog = try_load_catalog(settings)
     if catalog is None:
         raise HTTPException(status_code=503, detail=CATALOG_NOT_LOADED)
+    if tryon.engine is not None:
+        served = set(tryon.engine.garment_ids())
+        catalog = {gid: g for gid, g in catalog.items() if gid in served}
     return catalog
 
 
