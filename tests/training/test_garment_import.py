@@ -250,3 +250,25 @@ def test_no_garments_directory_is_refused(tmp_path, capsys, monkeypatch):
     monkeypatch.delenv("ULNEF_GARMENTS_DIR", raising=False)
     code = import_main([str(tmp_path / "x.obj"), "--id", "x", "--name", "X", "--category", "top"])
     assert code == 2 and "--models DIR or set ULNEF_GARMENTS_DIR" in capsys.readouterr().err
+
+
+def test_two_imports_at_once_both_publish(tube, floor, tmp_path: Path):
+    """Two imports into one garments directory at the same time, as the pods of a Job would run
+    them: each publishes its own directory and manifest (nothing shared to merge but the catalog the
+    service assembles), and both are served."""
+    import subprocess
+    import sys
+
+    source = write_obj(tmp_path / "files", "wrap", *tube, units="cm", floor=floor)
+    garments = tmp_path / "garments"
+    common = ["--category", "bottom", "--units", "cm", "--models", str(garments), *TINY, "--workers", "1"]
+    runs = [
+        subprocess.Popen([sys.executable, "-m", "training.garment_import", str(source), "--id", gid,
+                          "--name", gid, *common], stdout=subprocess.DEVNULL)  # fmt: skip
+        for gid in ("skirt_a", "skirt_b")
+    ]
+    assert [run.wait(timeout=900) for run in runs] == [0, 0]
+    dirs, broken = verified_imports(garments)
+    assert [d.name for d in dirs] == ["skirt_a", "skirt_b"] and broken == {}
+    assert sorted(p.name for p in garments.iterdir()) == ["skirt_a", "skirt_b"]
+    assert {"skirt_a", "skirt_b"} <= set(full_catalog(None, garments))
