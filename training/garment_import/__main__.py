@@ -4,11 +4,16 @@ What ``ulnef garments import`` runs (it needs the training extra: torch, anny). 
 the garment is published, 2 for a file or argument the import cannot use (the message names the
 file, the problem and the fix), 1 when an offline step failed (rerun to resume), 130 when
 interrupted (rerun to resume).
+
+``--job LIST.json`` takes the arguments from entry ``$JOB_COMPLETION_INDEX`` of a JSON list of
+objects (``file``, ``id``, ``name``, ``category``, and optionally ``layer_rank``, ``units``): one pod
+of a Kubernetes indexed Job per garment (``deploy/k8s-import/``).
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import re
 import sys
@@ -40,7 +45,29 @@ def parser() -> argparse.ArgumentParser:
     return p
 
 
+def job_arguments(path: Path, index: int) -> list[str]:
+    """The command line of entry ``index`` of the job list at ``path``."""
+    entry = json.loads(Path(path).read_text())[index]
+    argv = [str(entry["file"]), "--id", entry["id"], "--name", entry["name"], "--category", entry["category"]]
+    for key in ("layer_rank", "units"):
+        if key in entry:
+            argv += [f"--{key.replace('_', '-')}", str(entry[key])]
+    return argv
+
+
 def main(argv=None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv[:1] == ["--job"]:
+        if len(argv) < 2 or "JOB_COMPLETION_INDEX" not in os.environ:
+            print("ulnef garments import: --job LIST.json needs JOB_COMPLETION_INDEX (an indexed Job)",
+                  file=sys.stderr)  # fmt: skip
+            return 2
+        try:
+            argv = job_arguments(Path(argv[1]), int(os.environ["JOB_COMPLETION_INDEX"])) + argv[2:]
+        except (OSError, ValueError, KeyError, IndexError, TypeError) as e:
+            print(f"ulnef garments import: {argv[1]}: no usable entry {os.environ['JOB_COMPLETION_INDEX']} "
+                  f"({type(e).__name__}: {e})", file=sys.stderr)  # fmt: skip
+            return 2
     args = parser().parse_args(argv)
     directory = args.models or (Path(os.environ["ULNEF_GARMENTS_DIR"]) if os.environ.get("ULNEF_GARMENTS_DIR")
                                 else None)  # fmt: skip
