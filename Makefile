@@ -7,7 +7,7 @@ PIP := $(BIN)/python -m pip
 PIP_INSTALL := PIP_DISABLE_PIP_VERSION_CHECK=1 $(PIP) install -q
 # The one torch pin lives in pyproject.toml; installed on its own first so that the local CPU
 # wheel (pip find-links) is what satisfies anny's torch requirement, not the CUDA build.
-TORCH_PIN := $(shell grep -o '"torch==[^"]*"' pyproject.toml | tr -d '"')
+TORCH_PIN := $(shell grep -o '"torch==[^"]*"' pyproject.toml | head -n 1 | tr -d '"')
 
 JS_DIR := tests/js
 

@@ -101,3 +101,12 @@ def test_import_image_dockerfile():
         pytest.skip("hadolint missing")
     result = subprocess.run([hadolint, str(DOCKERFILE)], capture_output=True, text=True, check=False)
     assert result.returncode == 0, result.stdout + result.stderr
+
+
+def test_the_import_extra_pins_the_training_torch():
+    """One torch for training and import: the Makefile installs the first pin it finds first."""
+    import tomllib
+
+    extras = tomllib.loads((REPO / "pyproject.toml").read_text())["project"]["optional-dependencies"]
+    pins = {name: [r for r in reqs if r.startswith("torch")] for name, reqs in extras.items()}
+    assert pins["train"] == pins["import"] == ["torch==2.13.0"]
