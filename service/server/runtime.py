@@ -14,7 +14,7 @@ import time
 from collections.abc import Callable
 from concurrent.futures import Future
 
-from service.pipeline.catalog import verified_imports
+from service.pipeline.catalog import load_catalog, verified_imports
 from service.pipeline.tryon import Engine, ModelEngine, OutfitResult, OutfitSpec, self_test
 from service.process.manifest import MANIFEST_NAME, REFRESH_COMMAND, verify_manifest
 from service.server.cache import OutfitCache
@@ -113,6 +113,7 @@ class TryOn:
         try:
             if self.settings.verify_models:
                 check_models(self.settings)
+            load_catalog.cache_clear()  # a garment deleted and imported again under its id is new
             engine = self.engine_factory(self.settings)
             if self.settings.self_test_garments:
                 self_test(engine, self.settings.self_test_garments, self.settings.self_test_untangle)
