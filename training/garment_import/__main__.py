@@ -55,23 +55,25 @@ def job_arguments(path: Path, index: int) -> list[str]:
     return argv
 
 
+def fail(message: str) -> int:
+    """Say why on stderr; the exit status of a file or argument the import cannot use."""
+    print(f"ulnef garments import: {message}", file=sys.stderr)
+    return 2
+
+
 def main(argv=None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv[:1] == ["--job"]:
         if len(argv) < 2 or "JOB_COMPLETION_INDEX" not in os.environ:
-            print("ulnef garments import: --job LIST.json needs JOB_COMPLETION_INDEX (an indexed Job)",
-                  file=sys.stderr)  # fmt: skip
-            return 2
+            return fail("--job LIST.json needs JOB_COMPLETION_INDEX (an indexed Job)")
+        index = os.environ["JOB_COMPLETION_INDEX"]
         try:
-            argv = job_arguments(Path(argv[1]), int(os.environ["JOB_COMPLETION_INDEX"])) + argv[2:]
+            argv = job_arguments(Path(argv[1]), int(index)) + argv[2:]
         except (OSError, ValueError, KeyError, IndexError, TypeError) as e:
-            print(f"ulnef garments import: {argv[1]}: no usable entry {os.environ['JOB_COMPLETION_INDEX']} "
-                  f"({type(e).__name__}: {e})", file=sys.stderr)  # fmt: skip
-            return 2
+            return fail(f"{argv[1]}: no usable entry {index} ({type(e).__name__}: {e})")
     args = parser().parse_args(argv)
     directory = args.models or (Path(os.environ["ULNEF_GARMENTS_DIR"]) if os.environ.get("ULNEF_GARMENTS_DIR")
                                 else None)  # fmt: skip
-    fail = lambda message: print(f"ulnef garments import: {message}", file=sys.stderr) or 2  # noqa: E731
     if directory is None:
         return fail("no garments directory: pass --models DIR or set ULNEF_GARMENTS_DIR")
     if not ID_PATTERN.fullmatch(args.id):

@@ -77,7 +77,8 @@ def prepare(path: Path, spec: GarmentSpec, body: BodyModel) -> tuple[Garment, li
 def _run(step: list[str], stage: Path, log) -> float:
     """Run one offline command in the staging directory; raises RuntimeError naming it if it fails."""
     t0 = time.perf_counter()
-    env = os.environ | {"ULNEF_MODELS_DIR": str(stage / "models"), "PYTHONPATH": str(_repo())}
+    path = os.pathsep.join(p for p in (str(_repo()), os.environ.get("PYTHONPATH", "")) if p)
+    env = os.environ | {"ULNEF_MODELS_DIR": str(stage / "models"), "PYTHONPATH": path}
     log(f"$ python -m {' '.join(step)}")
     done = subprocess.run([sys.executable, "-m", *step], cwd=stage, env=env, check=False)
     if done.returncode != 0:

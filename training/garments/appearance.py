@@ -14,6 +14,7 @@ from pathlib import Path
 from service.pipeline.appearance import Material
 from service.pipeline.body import BodyModel
 from service.pipeline.catalog import Garment, load_catalog, save_garment
+from service.pipeline.gltf import COLORS
 from service.process.paths import models_dir
 from training.garments.fabric import Fabric, base_color, normal_map
 from training.garments.uv import cylinder_uv
@@ -21,13 +22,13 @@ from training.render import png_bytes
 
 # Yarn colours are the flat colours the outfits had before (service.pipeline.gltf.COLORS).
 FABRICS: dict[str, Fabric] = {
-    "tank_top": Fabric("rib", (0.85, 0.68, 0.25), tile=0.04),
-    "tshirt": Fabric("jersey", (0.70, 0.25, 0.22), tile=0.04),
-    "long_sleeve": Fabric("jersey", (0.50, 0.62, 0.48), tile=0.04),
-    "jacket": Fabric("twill", (0.25, 0.26, 0.28), tile=0.05, roughness=0.8),
-    "pants": Fabric("denim", (0.22, 0.33, 0.52), tile=0.05, roughness=0.85),
-    "shorts": Fabric("denim", (0.20, 0.52, 0.52), tile=0.05, roughness=0.85),
-    "skirt": Fabric("twill", (0.48, 0.28, 0.45), tile=0.05),
+    "tank_top": Fabric("rib", COLORS["tank_top"], tile=0.04),
+    "tshirt": Fabric("jersey", COLORS["tshirt"], tile=0.04),
+    "long_sleeve": Fabric("jersey", COLORS["long_sleeve"], tile=0.04),
+    "jacket": Fabric("twill", COLORS["jacket"], tile=0.05, roughness=0.8),
+    "pants": Fabric("denim", COLORS["pants"], tile=0.05, roughness=0.85),
+    "shorts": Fabric("denim", COLORS["shorts"], tile=0.05, roughness=0.85),
+    "skirt": Fabric("twill", COLORS["skirt"], tile=0.05),
 }
 
 
