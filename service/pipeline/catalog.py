@@ -19,7 +19,7 @@ from typing import Literal
 
 import numpy as np
 
-from service.pipeline.appearance import DisplayMesh, Material
+from service.pipeline.appearance import DisplayMesh, Embedding, Material
 from service.process.manifest import verify_manifest
 from service.process.paths import models_dir
 
@@ -83,6 +83,9 @@ def save_garment(directory: Path, garment: Garment) -> Path:
         arrays |= {"display_source": garment.display.source.astype(np.int32),
                    "display_uv": garment.display.uv.astype(np.float32),
                    "display_faces": garment.display.faces.astype(np.int32)}  # fmt: skip
+        if (e := garment.display.embedding) is not None:
+            arrays |= {"display_face": e.face.astype(np.int32), "display_bary": e.bary.astype(np.float32),
+                       "display_offset": e.offset.astype(np.float32)}  # fmt: skip
     if garment.material is not None:
         for slot, png in garment.material.textures.items():
             (directory / garment.material.texture_files[slot]).write_bytes(png)
@@ -97,8 +100,12 @@ def load_garment(directory: Path, entry: dict, origin: Origin = "bundled") -> Ga
         openings = {k[len(prefix) :]: data[k].astype(np.int64) for k in data.files if k.startswith(prefix)}
         display = None
         if "display_source" in data.files:
+            embedding = None
+            if "display_face" in data.files:
+                embedding = Embedding(data["display_face"].astype(np.int64), data["display_bary"],
+                                      data["display_offset"])  # fmt: skip
             display = DisplayMesh(data["display_source"].astype(np.int64), data["display_uv"],
-                                  data["display_faces"].astype(np.int64))  # fmt: skip
+                                  data["display_faces"].astype(np.int64), embedding)  # fmt: skip
             display.check(len(data["vertices"]), data["faces"].astype(np.int64))
         return Garment(
             id=entry["id"],

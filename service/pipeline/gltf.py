@@ -5,7 +5,8 @@ Anny's frame is Z up with the body facing -Y; glTF is Y up facing +Z, so points 
 Written with numpy and the standard library only: a JSON chunk and a binary chunk holding, per
 layer, float32 positions and normals and uint32 indices; a layer with a display mesh
 (``service.pipeline.appearance``) also gets TEXCOORD_0, and its material's PNG textures are embedded
-(each distinct image once). Normals come from the simulation mesh, so they stay smooth across UV seams.
+(each distinct image once). Normals come from the simulation mesh, so they stay smooth across UV seams
+(a display mesh embedded in a remeshed simulation mesh interpolates them).
 """
 
 from __future__ import annotations
@@ -108,7 +109,8 @@ def outfit_glb(layers: Sequence[GltfLayer | tuple]) -> bytes:
         normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
         attributes, faces = {}, f
         if layer.display is not None:
-            v, normals, faces = v[layer.display.source], normals[layer.display.source], layer.display.faces
+            (v, normals), faces = layer.display.place(v, f, normals), layer.display.faces
+            normals = normals.astype(np.float32)
         attributes["POSITION"] = add((v @ ANNY_TO_GLTF.T).astype(np.float32), 34962, 5126, "VEC3", True)
         attributes["NORMAL"] = add(normals, 34962, 5126, "VEC3", False)
         if layer.display is not None:

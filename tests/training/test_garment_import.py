@@ -166,8 +166,6 @@ def _plain(tmp_path: Path, name: str, vertices, faces, floor: float) -> Path:
         ("closed", "a closed surface without openings"),
         ("far", "from the avatar"),
         ("deep", "inside the avatar"),
-        ("coarse", "too coarse for the simulation"),
-        ("fine", "too fine for the simulation"),
     ],
 )
 def test_each_validation_error_names_the_problem(case, message, tube, body, floor, tmp_path, capsys):
@@ -191,15 +189,42 @@ def test_each_validation_error_names_the_problem(case, message, tube, body, floo
     elif case == "deep":
         centre = v.mean(0) * [1.0, 1.0, 0.0] + [0.0, 0.0, 1.0] * v
         v = centre + (v - centre) * [0.6, 0.6, 1.0]
-    elif case == "coarse":
-        v, f = welded(*skirt_tube(body, edge=0.06)[:2])
-    elif case == "fine":
-        import trimesh
-
-        mesh = trimesh.Trimesh(v, f, process=False).subdivide().subdivide().subdivide()
-        v, f = np.asarray(mesh.vertices), np.asarray(mesh.faces)
     err = _fails(tmp_path, capsys, _plain(tmp_path, case, v, f, floor))
     assert message in err and f"{case}.obj" in err
+
+
+@pytest.mark.parametrize(("edge", "word"), [(0.06, "coarse"), (0.003, "fine")])
+def test_a_mesh_too_coarse_or_too_fine_is_remeshed_and_shown_as_made(edge, word, body, floor, tmp_path):
+    """The simulation gets a ~12 mm mesh with the same openings; the display mesh is the file's (its
+    UVs, its faces; a coarse one split 1-to-4 with its UVs interpolated) riding on it, where the file
+    put it (a loose tube: nothing to push out of the body)."""
+    from service.geometry.closest import ClosestPoint
+    from service.geometry.mesh import edge_lengths, vertex_normals
+    from training.garment_import.validate import EDGE_RANGE
+
+    v, f, uv = skirt_tube(body, edge=edge, ease=(0.03, 0.06))
+    path = write_obj(tmp_path / word, word, v, f, uv, units="m", floor=floor)
+    file = read_garment(path, "m", floor, word)
+    garment, notes = prepare(path, GarmentSpec(word, "X", "bottom", 3, "m"), body)
+    assert any(f"too {word} for the simulation: remeshed" in n for n in notes)
+    assert not any("pushed out" in n for n in notes)
+    assert EDGE_RANGE[0] <= edge_lengths(garment.vertices, garment.faces).mean() <= EDGE_RANGE[1]
+    assert sorted(garment.openings) == ["hem", "waist"]
+    display = garment.display
+    display.check(len(garment.vertices), garment.faces)
+    if word == "fine":
+        np.testing.assert_array_equal(display.faces, file.display.faces)
+        np.testing.assert_array_equal(display.uv, file.display.uv)
+    else:
+        splits = round(np.log(len(display.faces) / len(file.display.faces)) / np.log(4))
+        assert splits >= 1 and len(display.faces) == len(file.display.faces) * 4**splits
+        # Interpolated UVs map the texture as before: the file's UV range, nothing new outside it.
+        np.testing.assert_allclose(display.uv.min(0), file.display.uv.min(0), atol=1e-6)
+        np.testing.assert_allclose(display.uv.max(0), file.display.uv.max(0), atol=1e-6)
+    normals = vertex_normals(garment.vertices, garment.faces)
+    placed, _ = display.place(garment.vertices, garment.faces, normals)
+    off = ClosestPoint.build(file.vertices, file.faces).query(placed).distance
+    assert off.max() < 1e-5  # float32 offsets; the coarse file's split vertices lie on its faces
 
 
 def _closed_box(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

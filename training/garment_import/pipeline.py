@@ -30,7 +30,8 @@ from service.process.manifest import file_sha256
 from service.process.paths import models_dir
 from training.garment_import.openings import name_openings
 from training.garment_import.read import GarmentFileError, read_garment
-from training.garment_import.validate import check_topology, fit_to_body
+from training.garment_import.remesh import needs_remesh, remesh_for_simulation
+from training.garment_import.validate import EDGE_RANGE, check_topology, fit_to_body
 
 STAGING = ".staging"
 IMPORT_RECORD = "import.json"
@@ -63,6 +64,11 @@ def prepare(path: Path, spec: GarmentSpec, body: BodyModel) -> tuple[Garment, li
     source = read_garment(path, spec.units, floor, spec.id)
     check_topology(path, source)
     source, notes = fit_to_body(path, source, body)
+    if (mean_edge := needs_remesh(source, EDGE_RANGE)) is not None:
+        source, note = remesh_for_simulation(path, source, mean_edge)
+        check_topology(path, source)
+        source, again = fit_to_body(path, source, body)
+        notes += [note, *again]
     joints = dict(zip(body.bone_names, body.bone_heads, strict=True))
     openings = name_openings(source.vertices, source.faces, spec.category, joints)
     if spec.category == "bottom" and "waist" not in openings:

@@ -2,9 +2,9 @@
 
 Refused (``GarmentFileError``, with the fix): several pieces, non-manifold edges, degenerate or
 duplicate faces, inconsistent winding, no boundary loop (a closed surface cannot be put on), a
-garment not on the avatar (most of it far away: wrong frame or units), cloth deep inside the body,
-a mesh too coarse or too fine for the simulation. Fixed and reported (notes): the whole garment
-wound inwards (flipped), cloth a little inside the body (pushed out to ``CLEARANCE``).
+garment not on the avatar (most of it far away: wrong frame or units), cloth deep inside the body.
+Fixed and reported (notes): the whole garment wound inwards (flipped), cloth a little inside the body
+(pushed out to ``CLEARANCE``); a mesh outside ``EDGE_RANGE`` is remeshed by ``remesh``.
 """
 
 from __future__ import annotations
@@ -15,8 +15,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from service.geometry.closest import ClosestPoint
-from service.geometry.mesh import connected_components, edge_lengths, vertex_normals
-from service.pipeline.appearance import DisplayMesh
+from service.geometry.mesh import connected_components, vertex_normals
 from service.pipeline.body import DEFAULT_BETA, BodyModel
 from training.garment_import.read import GarmentFileError, SourceGarment
 
@@ -50,9 +49,7 @@ def _where(body: BodyModel, points: np.ndarray) -> str:
 
 
 def _flip(garment: SourceGarment) -> SourceGarment:
-    display = garment.display
-    if display is not None:
-        display = DisplayMesh(display.source, display.uv, display.faces[:, ::-1].copy())
+    display = None if garment.display is None else garment.display.flipped()
     return replace(garment, faces=garment.faces[:, ::-1].copy(), display=display)
 
 
@@ -123,10 +120,4 @@ def fit_to_body(path, garment: SourceGarment, body: BodyModel) -> tuple[SourceGa
         notes.append(f"{int(inside.sum())} vertices closer than {CLEARANCE * 1e3:.0f} mm to the body (at "
                      f"most {depth:.1f} mm inside) pushed out, at the {where}")
         garment = replace(garment, vertices=moved)
-    mean_edge = float(edge_lengths(garment.vertices, garment.faces).mean())
-    lo, hi = EDGE_RANGE
-    if not lo <= mean_edge <= hi:
-        problem = (f"mean edge {mean_edge * 1e3:.1f} mm is too {'coarse' if mean_edge > hi else 'fine'} for "
-                   f"the simulation ({lo * 1e3:.0f}-{hi * 1e3:.0f} mm)")  # fmt: skip
-        raise GarmentFileError(path, problem, "Remesh it to edges of about 12 mm.")
     return garment, notes
