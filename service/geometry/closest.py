@@ -3,10 +3,9 @@
 Used by the canonical space (closest body point of a garment vertex) and by the drape's body
 collisions. ``closest_on_triangles`` is the vectorised point-triangle test (Ericson, Real-Time
 Collision Detection 5.1.5); ``ClosestPoint`` restricts it to triangles around the nearest
-vertices, and ``closest_point_reference`` checks every triangle. ``ClosestPoint.query`` screens
-the candidates with ``DistanceBounds`` (cheap bounds on each squared distance) and runs Ericson's
-test only where a bound leaves the winner open; ``ClosestPoint.query_reference`` tests every
-candidate, and the two agree bit for bit.
+vertices, and ``closest_point_reference`` checks every triangle. ``ClosestPoint.query`` runs the
+test in a compiled loop per point (``closest_kernel``); ``ClosestPoint.query_reference`` tests every
+candidate in numpy, and the two agree bit for bit.
 """
 
 from __future__ import annotations
@@ -17,9 +16,9 @@ from functools import cached_property
 import numpy as np
 from scipy.spatial import cKDTree
 
+from service.geometry.closest_kernel import select
 from service.geometry.mesh import check_mesh, face_normals
 from service.geometry.mesh_topology import LazyPseudoNormals, MeshTopology, PseudoNormals, mesh_topology
-from service.geometry.triangle_bounds import DistanceBounds
 from service.process.threads import pool
 
 
@@ -30,17 +29,23 @@ def _check_points(points: np.ndarray) -> np.ndarray:
     return points
 
 
+def _dot(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Dot products over the last axis (3), summed x, y, then z: the order of the compiled kernel
+    (``closest_kernel``), which ``einsum`` does not keep (it adds x and z first)."""
+    return u[..., 0] * v[..., 0] + u[..., 1] * v[..., 1] + u[..., 2] * v[..., 2]
+
+
 def closest_on_triangles(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
     """Barycentric coordinates ``(..., 3)`` of the point of triangle abc closest to p.
 
     All inputs ``(..., 3)`` broadcast together. Degenerate triangles fall back to their edges.
     """
     ab, ac, ap = b - a, c - a, p - a
-    d1, d2 = np.einsum("...d,...d->...", ab, ap), np.einsum("...d,...d->...", ac, ap)
+    d1, d2 = _dot(ab, ap), _dot(ac, ap)
     bp = p - b
-    d3, d4 = np.einsum("...d,...d->...", ab, bp), np.einsum("...d,...d->...", ac, bp)
+    d3, d4 = _dot(ab, bp), _dot(ac, bp)
     cp = p - c
-    d5, d6 = np.einsum("...d,...d->...", ab, cp), np.einsum("...d,...d->...", ac, cp)
+    d5, d6 = _dot(ab, cp), _dot(ac, cp)
     va = d3 * d6 - d5 * d4
     vb = d5 * d2 - d1 * d6
     vc = d1 * d4 - d3 * d2
@@ -144,10 +149,6 @@ class ClosestPoint:
     def pseudo(self) -> PseudoNormals:
         return LazyPseudoNormals.of(self.vertices, self.faces, self.fn, self.topology)
 
-    @cached_property
-    def bounds(self) -> DistanceBounds:
-        return DistanceBounds.build(self.vertices, self.faces)
-
     @property
     def boundary_edges(self) -> np.ndarray:
         """Sorted keys ``min * V + max`` of the edges with one triangle (an open mesh's rims)."""
@@ -223,7 +224,7 @@ class ClosestPoint:
         if len(points) <= QUERY_BLOCK or QUERY_THREADS <= 1:
             return self._query_block(points, k)
         # Build the lazy structures here: cached_property is not safe to fill from two threads.
-        _ = self.topology, self.ring, self.tree, self.fn, self.pseudo, self.bounds
+        _ = self.topology, self.ring, self.tree, self.fn, self.pseudo
         rounds = -(-len(points) // (QUERY_BLOCK * QUERY_THREADS))
         blocks = np.array_split(points, rounds * QUERY_THREADS)
         parts = list(pool("closest", QUERY_THREADS).map(lambda b: self._query_block(b, k), blocks))
@@ -249,55 +250,22 @@ class ClosestPoint:
         return cand[rows, best], w[rows, best]
 
     def _select(self, points, k: int):
-        """``_select_reference`` and the closest points ``(N, 3)`` (or None), with Ericson's test only
-        on the candidates whose lower distance bound is within the least upper bound of their
-        point's (~1.1 of ~16 per point)."""
+        """``_select_reference`` and the closest points ``(N, 3)`` (or None), by the compiled loop of
+        ``closest_kernel``: each point's candidates tested once each, in registers."""
         n = len(points)
         k = min(k, len(self.vertices))
         # One KD-tree worker: more never paid on 2 cores (and costs 0.2 ms per call on small
         # queries); the blocks already run on threads (``query``).
         _, near = self.tree.query(points, k=k, workers=1)
-        cand = self.ring[near.reshape(n, k)].reshape(n, -1)  # (N, C) in ring order, -1 padded
-        width = cand.shape[1]
-        # Each distinct (point, triangle) pair once: a sort (~7x faster than argsort) loses the ring
-        # order, which only the ties between the finalists need (found again below).
-        ranked = np.sort(cand, axis=1)
-        first = ranked >= 0
-        first[:, 1:] &= ranked[:, 1:] != ranked[:, :-1]
-        flat = np.flatnonzero(first)
-        rows, face = flat // width, ranked.ravel()[flat]
-        if not len(rows):  # no triangle around any point's k vertices (unreferenced vertices)
-            return *self._select_reference(points, k), None
-        lower, upper = self.bounds.squared_distance(points, rows, face)
-        start = np.flatnonzero(np.r_[True, rows[1:] != rows[:-1]])  # each point's first pair
-        least = np.minimum.reduceat(upper, start)  # the least upper bound of each point with a pair
-        finalist = lower <= np.repeat(least, np.diff(np.r_[start, len(rows)]))
-        rows, face = rows[finalist], face[finalist]
-        tri = self.vertices[self.faces[face]]  # (M, 3, 3)
-        p = points[rows]
-        w = closest_on_triangles(p, tri[:, 0], tri[:, 1], tri[:, 2])  # (M, 3)
-        q = np.einsum("mk,mkd->md", w, tri)
-        d = np.linalg.norm(p - q, axis=1)
-        # The reference's argmin runs over ring slots, and a triangle's first slot is where it counts:
-        # among finalists at the same distance, the earliest in ring order wins.
-        same = rows[1:] == rows[:-1]
-        shared = np.zeros(len(rows), dtype=bool)  # points with several finalists (~6 %)
-        shared[:-1] |= same
-        shared[1:] |= same
-        best = np.flatnonzero(~shared)
-        if len(best) < len(rows):
-            m = np.flatnonzero(shared)
-            slot = np.argmax(cand[rows[m]] == face[m, None], axis=1)
-            m = m[np.lexsort((slot, d[m], rows[m]))]
-            m = m[np.r_[True, rows[m[1:]] != rows[m[:-1]]]]
-            best = np.sort(np.concatenate([best, m]))  # rows ascend with the finalist index
-        if len(best) == n:
-            return face[best], w[best], q[best]
-        # Some points without a triangle around their k vertices: as the reference.
-        face_all, bary_all = self._select_reference(points, k)
-        found = rows[best]
-        face_all[found], bary_all[found] = face[best], w[best]
-        return face_all, bary_all, None
+        face, bary, point = np.empty(n, dtype=np.int64), np.empty((n, 3)), np.empty((n, 3))
+        select(points, self.vertices, self.faces, self.ring, near.reshape(n, k), face, bary, point)
+        missing = np.flatnonzero(face < 0)
+        if not len(missing):
+            return face, bary, point
+        # No triangle around a point's k vertices (unreferenced vertices), or a NaN point: as the
+        # reference has it.
+        face[missing], bary[missing] = self._select_reference(points[missing], k)
+        return face, bary, None
 
 
 QUERY_BLOCK = 4096

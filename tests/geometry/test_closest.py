@@ -1,6 +1,7 @@
-"""``service/geometry/closest.py``: the lazily built query against the all-triangles reference, the screened
-query against the one that tests every candidate, the distance bounds that screen against Ericson's
-test, and the bincount sums against the ``np.add.at`` they replace."""
+"""``service/geometry/closest.py``: the lazily built query against the all-triangles reference, the
+compiled query (``closest_kernel``) against the numpy one that tests every candidate, the kernel's
+triangle test against Ericson's vectorised one, and the bincount sums against the ``np.add.at`` they
+replace."""
 
 from __future__ import annotations
 
@@ -17,7 +18,6 @@ from service.geometry.mesh_topology import (
     _unique_edges,
     mesh_topology,
 )
-from service.geometry.triangle_bounds import DistanceBounds
 
 
 def test_unique_edges_is_np_unique():
@@ -134,8 +134,8 @@ def _probe_points(v, f, rng, n=600):
 
 
 def test_query_is_the_reference_query_bit_for_bit():
-    """Screening the candidates by ``DistanceBounds`` changes nothing: closed and open meshes, a mesh
-    far from the origin, points on vertices and edges (exact ties, settled by ring order)."""
+    """The compiled loop answers as the numpy reference: closed and open meshes, a mesh far from the
+    origin, points on vertices and edges (exact ties, settled by ring order)."""
     v, f, rng = _bumpy_sphere(5)
     box = trimesh.creation.box().subdivide().subdivide()
     box.update_faces(box.face_normals[:, 2] < 0.5)  # an open box: its top is a rim
@@ -148,8 +148,8 @@ def test_query_is_the_reference_query_bit_for_bit():
 
 
 def test_query_is_the_reference_query_on_degenerate_triangles():
-    """Collapsed and zero-area triangles (the screen leaves them to Ericson's test) and vertices that no
-    triangle uses, some points' k nearest among them (both then answer the reference's way)."""
+    """Collapsed and zero-area triangles and vertices that no triangle uses, some points' k nearest
+    among them (both then answer the reference's way)."""
     v, f, rng = _bumpy_sphere(6)
     f = f.copy()
     f[:40, 2] = f[:40, 1]  # an edge twice
@@ -163,31 +163,36 @@ def test_query_is_the_reference_query_on_degenerate_triangles():
     _assert_same(mesh.query(points), mesh.query_reference(points))
 
 
-def test_distance_bounds_hold_ericsons_distance():
-    """lower <= |p - closest point|^2 <= upper, the closest point by ``closest_on_triangles``: random
-    triangles from fat to slivers, 1 cm from 1 km off the origin, points from on them to 1000 m away
-    (the bounds' rounding allowance is argued in ``DistanceBounds``)."""
+def test_the_kernels_triangle_test_is_ericsons_bit_for_bit():
+    """``closest_kernel``'s scalar test against the vectorised ``closest_on_triangles``: random
+    triangles from fat to slivers (and collapsed ones), 1 cm to 1 km off the origin, points from on
+    them to 1000 m away, every Voronoi region hit."""
+    from numba import njit
+
+    from service.geometry.closest_kernel import _barycentric
+
+    @njit
+    def run(p, tri, out):
+        for i in range(len(p)):
+            _barycentric(p[i, 0], p[i, 1], p[i, 2], tri[i, 0], tri[i, 1], tri[i, 2], out[i])
+
     rng = np.random.default_rng(7)
     n = 60_000
     origin = rng.normal(size=(n, 1, 3)) * 10.0 ** rng.integers(0, 4, (n, 1, 1))
     edge = rng.normal(scale=0.01, size=(n, 2, 3))
     fat = 10.0 ** rng.uniform(-9, 0, (n, 1))  # of the second edge across the first
     edge[:, 1] = rng.uniform(-0.5, 1.5, (n, 1)) * edge[:, 0] + fat * edge[:, 1]
+    edge[: n // 100, 1] = 0.0  # collapsed: an edge twice
     tri = np.concatenate([origin, origin + edge], axis=1)  # (n, 3, 3)
     direction = rng.normal(size=(n, 3))
     direction /= np.linalg.norm(direction, axis=1, keepdims=True)
     points = tri.mean(axis=1) + direction * 0.01 * 10.0 ** rng.uniform(-8, 5, (n, 1))
-    bounds = DistanceBounds.build(tri.reshape(-1, 3), np.arange(3 * n).reshape(n, 3))
-    lower, upper = bounds.squared_distance(points, np.arange(n), np.arange(n))
-    w = closest_on_triangles(points, tri[:, 0], tri[:, 1], tri[:, 2])
-    d2 = np.linalg.norm(points - np.einsum("mk,mkd->md", w, tri), axis=1) ** 2
-    assert np.all(lower <= d2) and np.all(d2 <= upper)
-    # Narrow enough to screen: a mesh of well-shaped triangles near the origin gets ~1e-7 of the scale.
-    shaped = np.flatnonzero((fat[:, 0] > 0.3) & (np.abs(origin[:, 0]).max(axis=1) < 10))
-    bounds = DistanceBounds.build(tri[shaped].reshape(-1, 3), np.arange(3 * len(shaped)).reshape(-1, 3))
-    lower, upper = bounds.squared_distance(points[shaped], np.arange(len(shaped)), np.arange(len(shaped)))
-    scale = d2[shaped] + np.einsum("nkd,nkd->n", edge[shaped], edge[shaped])
-    assert len(shaped) > 1000 and np.all(upper - lower <= 1e-5 * scale)
+    w = np.empty((n, 3))
+    run(points, tri, w)
+    expected = closest_on_triangles(points, tri[:, 0], tri[:, 1], tri[:, 2])
+    np.testing.assert_array_equal(w, expected)
+    regions = {tuple(row) for row in (expected > 0).astype(int)}
+    assert len(regions) == 7  # 3 vertices, 3 edges, the face
 
 
 def _open_box():

@@ -1,0 +1,107 @@
+"""Compiled closest-point selection (numba): ``ClosestPoint._select_reference`` one point at a time.
+
+The numpy path spends most of a query on arrays of (point, candidate triangle) pairs: sorting them
+to test each pair once, screening them with bounds, gathering triangles. One compiled loop per point
+over its candidates in ring order does the same work in registers: Ericson's test
+(``closest.closest_on_triangles``) written out with the same operations in the same order, so the
+answer is the reference's bit for bit (tested), and the first candidate in ring order wins ties, as
+the reference's argmin. ``nogil``: the query's blocks run on two threads.
+
+Compiled on first use and cached on disk (``cache=True``: next to this file, or in
+``NUMBA_CACHE_DIR``; the container image compiles it at build time).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _safe(num: float, den: float) -> float:
+    return num / (den if abs(den) > 1e-30 else 1e-30)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _clip01(x: float) -> float:
+    # np.clip(x, 0, 1): NaN stays NaN
+    return 0.0 if x < 0.0 else (1.0 if x > 1.0 else x)
+
+
+@njit(cache=True, nogil=True)
+def _barycentric(px, py, pz, a, b, c, out):
+    """``closest_on_triangles`` for one point and one triangle (a, b, c: (3,) arrays) into ``out (3,)``,
+    the same floating-point operations in the same order."""
+    abx, aby, abz = b[0] - a[0], b[1] - a[1], b[2] - a[2]
+    acx, acy, acz = c[0] - a[0], c[1] - a[1], c[2] - a[2]
+    apx, apy, apz = px - a[0], py - a[1], pz - a[2]
+    d1 = abx * apx + aby * apy + abz * apz
+    d2 = acx * apx + acy * apy + acz * apz
+    bpx, bpy, bpz = px - b[0], py - b[1], pz - b[2]
+    d3 = abx * bpx + aby * bpy + abz * bpz
+    d4 = acx * bpx + acy * bpy + acz * bpz
+    cpx, cpy, cpz = px - c[0], py - c[1], pz - c[2]
+    d5 = abx * cpx + aby * cpy + abz * cpz
+    d6 = acx * cpx + acy * cpy + acz * cpz
+    va = d3 * d6 - d5 * d4
+    vb = d5 * d2 - d1 * d6
+    vc = d1 * d4 - d3 * d2
+    # The reference applies the regions from the face to the vertices, each overriding the last;
+    # here the last one that holds is taken directly.
+    if d1 <= 0 and d2 <= 0:
+        out[0], out[1], out[2] = 1.0, 0.0, 0.0
+    elif d3 >= 0 and d4 <= d3:
+        out[0], out[1], out[2] = 0.0, 1.0, 0.0
+    elif d6 >= 0 and d5 <= d6:
+        out[0], out[1], out[2] = 0.0, 0.0, 1.0
+    elif vc <= 0 and d1 >= 0 and d3 <= 0:
+        t = _clip01(_safe(d1, d1 - d3))
+        out[0], out[1], out[2] = 1 - t, t, 0.0
+    elif vb <= 0 and d2 >= 0 and d6 <= 0:
+        t = _clip01(_safe(d2, d2 - d6))
+        out[0], out[1], out[2] = 1 - t, 0.0, t
+    elif va <= 0 and (d4 - d3) >= 0 and (d5 - d6) >= 0:
+        t = _clip01(_safe(d4 - d3, (d4 - d3) + (d5 - d6)))
+        out[0], out[1], out[2] = 0.0, 1 - t, t
+    else:
+        den = va + vb + vc
+        v, t = _safe(vb, den), _safe(vc, den)
+        out[0], out[1], out[2] = 1 - v - t, v, t
+
+
+@njit(cache=True, nogil=True)
+def select(points, vertices, faces, ring, near, face_out, bary_out, point_out):
+    """For each of ``points (N, 3)``: the closest point among the triangles of ``ring (V, R)`` (padded
+    with -1) around its nearest vertices ``near (N, k)``, into ``face_out (N,)`` (-1 where there is
+    no candidate), ``bary_out (N, 3)`` and ``point_out (N, 3)``."""
+    n, k = near.shape
+    r = ring.shape[1]
+    w = np.empty(3)
+    # Neighbouring vertices share most of their rings' triangles: each is tested once per point
+    # (the one tested first is the one the reference's argmin would keep among its repeats).
+    seen = np.full(len(faces), -1, dtype=np.int64)
+    for i in range(n):
+        px, py, pz = points[i, 0], points[i, 1], points[i, 2]
+        best = np.inf
+        face_out[i] = -1
+        for j in range(k):
+            v = near[i, j]
+            for s in range(r):
+                f = ring[v, s]
+                if f < 0:
+                    break
+                if seen[f] == i:
+                    continue
+                seen[f] = i
+                a, b, c = vertices[faces[f, 0]], vertices[faces[f, 1]], vertices[faces[f, 2]]
+                _barycentric(px, py, pz, a, b, c, w)
+                qx = w[0] * a[0] + w[1] * b[0] + w[2] * c[0]
+                qy = w[0] * a[1] + w[1] * b[1] + w[2] * c[1]
+                qz = w[0] * a[2] + w[1] * b[2] + w[2] * c[2]
+                dx, dy, dz = px - qx, py - qy, pz - qz
+                d = np.sqrt(dx * dx + dy * dy + dz * dz)
+                if d < best:  # strict: the first in ring order wins ties, as argmin
+                    best = d
+                    face_out[i] = f
+                    bary_out[i, 0], bary_out[i, 1], bary_out[i, 2] = w[0], w[1], w[2]
+                    point_out[i, 0], point_out[i, 1], point_out[i, 2] = qx, qy, qz
