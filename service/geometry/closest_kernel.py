@@ -29,7 +29,7 @@ def _clip01(x: float) -> float:
 
 
 @njit(cache=True, nogil=True)
-def _barycentric(px, py, pz, a, b, c, out):
+def barycentric(px, py, pz, a, b, c, out):
     """``closest_on_triangles`` for one point and one triangle (a, b, c: (3,) arrays) into ``out (3,)``,
     the same floating-point operations in the same order."""
     abx, aby, abz = b[0] - a[0], b[1] - a[1], b[2] - a[2]
@@ -94,7 +94,7 @@ def select(points, vertices, faces, ring, near, face_out, bary_out, point_out):
                     continue
                 seen[f] = i
                 a, b, c = vertices[faces[f, 0]], vertices[faces[f, 1]], vertices[faces[f, 2]]
-                _barycentric(px, py, pz, a, b, c, w)
+                barycentric(px, py, pz, a, b, c, w)
                 qx = w[0] * a[0] + w[1] * b[0] + w[2] * c[0]
                 qy = w[0] * a[1] + w[1] * b[1] + w[2] * c[1]
                 qz = w[0] * a[2] + w[1] * b[2] + w[2] * c[2]

@@ -15,12 +15,11 @@ matrix per point set (``TransferWeights``) applied to any number of shapes.
 
 ``transfer_weights_reference`` computes the weights as written; ``transfer_weights`` gives the same
 ones (to rounding) with less work, on two threads, and ``to_bodies`` carries a request's garments in
-one pass without forming them. Two thirds of what is left is the 32-nearest-vertex query (scipy's
-KD-tree, ~3.5 us a point whatever its distance; lists of precomputed neighbours checked against a
-bound were no faster in numpy). A grid of B~s per corner body (like
-``service.geometry.sdf_grid``) would be cheaper still but misses by up to 4.9 mm at 6 mm spacing: the
-truncations to the 32 nearest vertices and the 8 nearest triangles make B~s jump by ~0.1-1 mm
-wherever those sets change, which trilinear interpolation cannot follow.
+one pass without forming them. The 32 nearest vertices come from cell lists built once
+(``service.geometry.near_vertices``, compiled: ~1 us a point against the KD-tree's ~3.5 us). A grid
+of B~s per corner body (like ``service.geometry.sdf_grid``) would be cheaper still but misses by up
+to 4.9 mm at 6 mm spacing: the truncations to the 32 nearest vertices and the 8 nearest triangles
+make B~s jump by ~0.1-1 mm wherever those sets change, which trilinear interpolation cannot follow.
 """
 
 from __future__ import annotations
@@ -31,7 +30,8 @@ import numpy as np
 from scipy.sparse import csr_matrix
 
 from service.geometry.closest import ClosestPoint
-from service.geometry.triangle_table import TriangleTable
+from service.geometry.near_vertices import NeighbourCells
+from service.pipeline.canonical_kernel import transfer_rows
 from service.process.threads import pool
 
 BLEND_DISTANCE = 0.03  # m: beyond it only the smooth term remains
@@ -117,19 +117,20 @@ class CanonicalSpace:
     mean_vertices: np.ndarray  # (V, 3) float64, the body at the canonical shape
     faces: np.ndarray  # (F, 3)
     closest: ClosestPoint
-    triangles: TriangleTable
     threads: int = 2  # for transfer_weights
 
     def __post_init__(self):
         # Filled here, not lazily: the blocks run on threads.
         self._ring = self.closest.ring.astype(np.int32)  # (V, R) faces around each vertex, -1 padded
         self._tree = self.closest.tree
+        # The far term's nearest vertices from cell lists built once (~0.7 s, ~16 MB for Anny):
+        # the KD-tree's answer at a third of its cost (``service.geometry.near_vertices``).
+        self._near = NeighbourCells.build(self.mean_vertices, NEIGHBOURS, self._tree)
 
     @classmethod
     def build(cls, mean_vertices: np.ndarray, faces: np.ndarray, threads: int = 2) -> CanonicalSpace:
         closest = ClosestPoint.build(mean_vertices, faces)
-        table = TriangleTable.build(closest.vertices, closest.faces)
-        return cls(closest.vertices, closest.faces, closest, table, threads)
+        return cls(closest.vertices, closest.faces, closest, threads)
 
     def transfer_weights(self, points: np.ndarray) -> TransferWeights:
         """Weights for canonical ``points (N, 3)``: those of ``transfer_weights_reference`` (to rounding,
@@ -163,59 +164,22 @@ class CanonicalSpace:
         return list(pool("canonical", self.threads).map(run, blocks))
 
     def _transfer_rows(self, points: np.ndarray, workers: int = 1) -> _TransferRows:
-        """``transfer_weights`` of ``points (N, 3) float64`` with less work than the reference.
-
-        One nearest-vertex query serves both terms (its first NEAR_VERTICES columns are the near
-        term's vertices); each distinct (point, triangle) pair is tested once with ``TriangleTable``,
-        and barycentric coordinates worked out only for the NEAR_TRIANGLES chosen; those are found by
-        partition, not sort (the soft-min does not depend on their order). A triangle in
-        the rings of several near vertices keeps one slot per ring, as in the reference: it weighs
-        more in the soft-min. Only points nearer than BLEND_DISTANCE (s < 1) get a near term: (1 - s)
-        is exactly 0 beyond (on the jacket, more than half of the vertices).
-        """
-        n = len(points)
-        k = min(NEIGHBOURS, len(self.mean_vertices))
-        vdist, far_index = self._tree.query(points, k=k, workers=workers)
-        vdist, far_index = vdist.reshape(n, k), far_index.reshape(n, k)
-        ring = np.take(self._ring, far_index[:, :NEAR_VERTICES], axis=0)
-        cand = ring.reshape(n, ring.shape[1] * ring.shape[2])  # (N, C) per ring slot
-        cand.sort(axis=1)
-        valid = cand >= 0  # padding (-1) sorts first and is never tested
-        first = valid.copy()
-        first[:, 1:] &= cand[:, 1:] != cand[:, :-1]
-        pair = np.flatnonzero(first)  # distinct (point, triangle) pairs, row by row
-        face = np.take(cand, pair)
-        pairs = self.triangles.test(np.take(points, pair // cand.shape[1], axis=0), face)
-        d2_pair = pairs.d2
-        slot = np.cumsum(first.ravel()).reshape(first.shape)  # each slot's pair, from 1
-        end = slot[:, -1]  # of each row's pairs
-        start = np.concatenate([[0], end[:-1]])
-        d0_2 = np.full(n, np.inf)
-        if len(pair):
-            has = end > start
-            d0_2[has] = np.minimum.reduceat(d2_pair, start[has])
-        d0 = np.sqrt(d0_2)
-        s = _smoothstep(d0 / BLEND_DISTANCE)
-        sigma = SIGMA_MIN + 0.5 * d0[:, None]
-        gauss = np.exp((vdist**2 - vdist[:, :1] ** 2) * (-0.5 / sigma**2))
-        gauss *= s[:, None] / gauss.sum(axis=1, keepdims=True)
-        near = np.flatnonzero(s < 1)
-        m = min(NEAR_TRIANGLES, cand.shape[1])
-        if not len(near):
-            return _TransferRows(far_index, gauss, near, np.zeros((0, 3 * m), int), np.zeros((0, 3 * m)))
-        # Each slot's pair (repeats are adjacent after the sort; padding gets an unused one).
-        slot = np.take(slot, near, axis=0) - 1
-        d2 = np.where(np.take(valid, near, axis=0), np.take(d2_pair, slot), np.inf)  # (n, C)
-        chosen = np.argpartition(d2, m - 1, axis=1)[:, :m]
-        d2 = np.take_along_axis(d2, chosen, 1)
-        pick = np.maximum(np.take_along_axis(slot, chosen, 1), 0)  # (n, m) chosen pairs
-        tau = np.maximum(SOFTNESS * d0[near, None], 1e-9)
-        soft = np.where(np.isfinite(d2), np.exp((d2 - d0_2[near, None]) * (-0.5 / tau**2)), 0.0)
-        soft *= (1 - s[near, None]) / soft.sum(axis=1, keepdims=True)
-        b, c = pairs.bary_bc(pick)
-        weight = np.stack([soft * (1 - b - c), soft * b, soft * c], axis=2).reshape(len(near), 3 * m)
-        index = np.take(self.faces, np.take(face, pick), axis=0).reshape(len(near), 3 * m)
-        return _TransferRows(far_index, gauss, near, index, weight)
+        """``transfer_weights`` of ``points (N, 3) float64`` with less work than the reference: the
+        nearest vertices from ``NeighbourCells``, then one compiled loop per point
+        (``canonical_kernel.transfer_rows``) that tests each distinct candidate triangle once. Only
+        points nearer than BLEND_DISTANCE (s < 1) get a near term: (1 - s) is exactly 0 beyond (on the
+        jacket, more than half of the vertices)."""
+        vdist, far_index = self._near.query(points)
+        n, k = far_index.shape
+        t3 = 3 * NEAR_TRIANGLES
+        far_weight = np.empty((n, k))
+        near_index, near_weight = np.empty((n, t3), dtype=np.int64), np.empty((n, t3))
+        has_near = np.empty(n, dtype=np.bool_)
+        transfer_rows(points, self.mean_vertices, self.faces, self._ring, vdist, far_index, NEAR_VERTICES,
+                      NEAR_TRIANGLES, BLEND_DISTANCE, SIGMA_MIN, SOFTNESS, far_weight, near_index,
+                      near_weight, has_near)  # fmt: skip
+        near = np.flatnonzero(has_near)
+        return _TransferRows(far_index, far_weight, near, near_index[near], near_weight[near])
 
     def transfer_weights_reference(self, points: np.ndarray) -> TransferWeights:
         """Weights for canonical ``points (N, 3)`` straight from the definition (module docstring)."""

@@ -169,12 +169,12 @@ def test_the_kernels_triangle_test_is_ericsons_bit_for_bit():
     them to 1000 m away, every Voronoi region hit."""
     from numba import njit
 
-    from service.geometry.closest_kernel import _barycentric
+    from service.geometry.closest_kernel import barycentric
 
     @njit
     def run(p, tri, out):
         for i in range(len(p)):
-            _barycentric(p[i, 0], p[i, 1], p[i, 2], tri[i, 0], tri[i, 1], tri[i, 2], out[i])
+            barycentric(p[i, 0], p[i, 1], p[i, 2], tri[i, 0], tri[i, 1], tri[i, 2], out[i])
 
     rng = np.random.default_rng(7)
     n = 60_000

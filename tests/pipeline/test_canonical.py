@@ -3,9 +3,8 @@
 import numpy as np
 import pytest
 
-from service.geometry.closest import ClosestPoint, closest_on_triangles, closest_point_reference
+from service.geometry.closest import ClosestPoint, closest_point_reference
 from service.geometry.mesh import unique_edges, vertex_normals
-from service.geometry.triangle_table import TriangleTable
 from service.pipeline.body import DEFAULT_BETA, BodyModel
 from service.pipeline.canonical import CHUNK, NEAR_TRIANGLES, CanonicalSpace
 
@@ -86,30 +85,6 @@ def test_to_canonical_inverts_to_body(body, space):
     assert np.median(np.linalg.norm(back - x, axis=1)) < 1e-5
 
 
-def test_triangle_table_matches_the_reference_closest_points(body):
-    """``TriangleTable`` (the fast transfer's triangle test) against Ericson's Voronoi regions, on
-    the body's triangles and on degenerate ones (a zero-area sliver and a collapsed triangle)."""
-    _, v, f = body
-    rng = np.random.default_rng(3)
-    face = rng.integers(0, len(f), 5000)
-    tri = v[f[face]]
-    tri[:50, 2] = tri[:50, 0] + 0.3 * (tri[:50, 1] - tri[:50, 0])  # collinear
-    tri[50:60, 1:] = tri[50:60, :1]  # a point
-    points = tri.mean(axis=1) + rng.normal(0, 0.02, (len(face), 3))
-    table = TriangleTable.build(tri.reshape(-1, 3), np.arange(3 * len(face)).reshape(-1, 3))
-    bary, d2 = table.closest(points, np.arange(len(face)))
-    ref = closest_on_triangles(points, tri[:, 0], tri[:, 1], tri[:, 2])
-    ref_point = np.einsum("mk,mkd->md", ref, tri)
-    np.testing.assert_allclose(np.sqrt(d2), np.linalg.norm(points - ref_point, axis=1), atol=1e-12)
-    np.testing.assert_allclose(np.einsum("mk,mkd->md", bary, tri), ref_point, atol=1e-12)
-    np.testing.assert_allclose(bary.sum(axis=1), 1.0, atol=1e-12)
-    np.testing.assert_allclose(table.test(points, np.arange(len(face))).d2, d2)
-    # The transfer asks for the barycentric coordinates of chosen pairs only.
-    pick = rng.integers(0, len(face), (100, 8))
-    wb, wc = table.test(points, np.arange(len(face))).bary_bc(pick)
-    np.testing.assert_array_equal(np.stack([wb, wc], axis=2), bary[pick, 1:])
-
-
 @pytest.mark.parametrize("threads", [1, 2])
 def test_fast_transfer_matches_the_reference(body, space, threads):
     """The fast transfer (one shared neighbour query, distinct pairs tested once, partition, blocks on
@@ -117,7 +92,7 @@ def test_fast_transfer_matches_the_reference(body, space, threads):
     the surface, near it, inside, up to 15 cm out (where only the far term is left) and for more
     points than one block."""
     model, mean, f = body
-    fast = CanonicalSpace(space.mean_vertices, space.faces, space.closest, space.triangles, threads)
+    fast = CanonicalSpace(space.mean_vertices, space.faces, space.closest, threads)
     rng = np.random.default_rng(4)
     n = CHUNK + 1500
     face = rng.integers(0, len(f), n)
