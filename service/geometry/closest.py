@@ -16,7 +16,7 @@ from functools import cached_property
 import numpy as np
 from scipy.spatial import cKDTree
 
-from service.geometry.closest_kernel import select
+from service.geometry.closest_kernel import bounding_spheres, select
 from service.geometry.mesh import check_mesh, face_normals
 from service.geometry.mesh_topology import LazyPseudoNormals, MeshTopology, PseudoNormals, mesh_topology
 from service.process.threads import pool
@@ -141,6 +141,11 @@ class ClosestPoint:
         return cKDTree(self.vertices)
 
     @cached_property
+    def spheres(self) -> np.ndarray:
+        """(F, 4) bounding sphere of each triangle, for the compiled selection."""
+        return bounding_spheres(self.vertices, self.faces)
+
+    @cached_property
     def fn(self) -> np.ndarray:
         """(F, 3) unit face normals."""
         return face_normals(self.vertices, self.faces)
@@ -224,7 +229,7 @@ class ClosestPoint:
         if len(points) <= QUERY_BLOCK or QUERY_THREADS <= 1:
             return self._query_block(points, k)
         # Build the lazy structures here: cached_property is not safe to fill from two threads.
-        _ = self.topology, self.ring, self.tree, self.fn, self.pseudo
+        _ = self.topology, self.ring, self.tree, self.spheres, self.fn, self.pseudo
         rounds = -(-len(points) // (QUERY_BLOCK * QUERY_THREADS))
         blocks = np.array_split(points, rounds * QUERY_THREADS)
         parts = list(pool("closest", QUERY_THREADS).map(lambda b: self._query_block(b, k), blocks))
@@ -258,7 +263,8 @@ class ClosestPoint:
         # queries); the blocks already run on threads (``query``).
         _, near = self.tree.query(points, k=k, workers=1)
         face, bary, point = np.empty(n, dtype=np.int64), np.empty((n, 3)), np.empty((n, 3))
-        select(points, self.vertices, self.faces, self.ring, near.reshape(n, k), face, bary, point)
+        select(points, self.vertices, self.faces, self.spheres, self.ring, near.reshape(n, k), face, bary,
+               point)  # fmt: skip
         missing = np.flatnonzero(face < 0)
         if not len(missing):
             return face, bary, point

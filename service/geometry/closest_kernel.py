@@ -70,10 +70,12 @@ def barycentric(px, py, pz, a, b, c, out):
 
 
 @njit(cache=True, nogil=True)
-def select(points, vertices, faces, ring, near, face_out, bary_out, point_out):
+def select(points, vertices, faces, spheres, ring, near, face_out, bary_out, point_out):
     """For each of ``points (N, 3)``: the closest point among the triangles of ``ring (V, R)`` (padded
     with -1) around its nearest vertices ``near (N, k)``, into ``face_out (N,)`` (-1 where there is
-    no candidate), ``bary_out (N, 3)`` and ``point_out (N, 3)``."""
+    no candidate), ``bary_out (N, 3)`` and ``point_out (N, 3)``. ``spheres (F, 4)``: a centre and
+    radius holding each triangle (``bounding_spheres``): a triangle whose sphere is farther than
+    the best distance so far cannot be closer, and is not tested."""
     n, k = near.shape
     r = ring.shape[1]
     w = np.empty(3)
@@ -93,6 +95,10 @@ def select(points, vertices, faces, ring, near, face_out, bary_out, point_out):
                 if seen[f] == i:
                     continue
                 seen[f] = i
+                sx, sy, sz = px - spheres[f, 0], py - spheres[f, 1], pz - spheres[f, 2]
+                gap = np.sqrt(sx * sx + sy * sy + sz * sz) - spheres[f, 3]
+                if gap > best:  # strictly: a tie may still win by ring order
+                    continue
                 a, b, c = vertices[faces[f, 0]], vertices[faces[f, 1]], vertices[faces[f, 2]]
                 barycentric(px, py, pz, a, b, c, w)
                 qx = w[0] * a[0] + w[1] * b[0] + w[2] * c[0]
@@ -105,3 +111,12 @@ def select(points, vertices, faces, ring, near, face_out, bary_out, point_out):
                     face_out[i] = f
                     bary_out[i, 0], bary_out[i, 1], bary_out[i, 2] = w[0], w[1], w[2]
                     point_out[i, 0], point_out[i, 1], point_out[i, 2] = qx, qy, qz
+
+
+def bounding_spheres(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """``(F, 4)``: each triangle's centroid and its distance to the farthest corner, grown by a
+    relative 1e-9 so that rounding in the test never rules out the closest triangle."""
+    tri = vertices[faces]
+    centre = tri.mean(axis=1)
+    radius = np.linalg.norm(tri - centre[:, None], axis=2).max(axis=1)
+    return np.concatenate([centre, (radius * (1 + 1e-9) + 1e-12)[:, None]], axis=1)
