@@ -113,10 +113,18 @@ def select(points, vertices, faces, spheres, ring, near, face_out, bary_out, poi
                     point_out[i, 0], point_out[i, 1], point_out[i, 2] = qx, qy, qz
 
 
+@njit(cache=True, nogil=True)
 def bounding_spheres(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """``(F, 4)``: each triangle's centroid and its distance to the farthest corner, grown by a
     relative 1e-9 so that rounding in the test never rules out the closest triangle."""
-    tri = vertices[faces]
-    centre = tri.mean(axis=1)
-    radius = np.linalg.norm(tri - centre[:, None], axis=2).max(axis=1)
-    return np.concatenate([centre, (radius * (1 + 1e-9) + 1e-12)[:, None]], axis=1)
+    out = np.empty((len(faces), 4))
+    for f in range(len(faces)):
+        for d in range(3):
+            out[f, d] = (vertices[faces[f, 0], d] + vertices[faces[f, 1], d] + vertices[faces[f, 2], d]) / 3.0
+        r2 = 0.0
+        for corner in range(3):
+            v = faces[f, corner]
+            dx, dy, dz = vertices[v, 0] - out[f, 0], vertices[v, 1] - out[f, 1], vertices[v, 2] - out[f, 2]
+            r2 = max(r2, dx * dx + dy * dy + dz * dz)
+        out[f, 3] = np.sqrt(r2) * (1 + 1e-9) + 1e-12
+    return out
