@@ -53,6 +53,17 @@ podman "${STORE[@]}" run --rm --runtime runc --network none --read-only --tmpfs 
     --name "Wrap skirt" --category bottom --units cm --train-shapes 3 --test-shapes 2 --field-steps 60 \
     2>&1 | grep -v -e "it/s" -e "body/s" -e "step/s"
 echo "run: import in $(($(date +%s) - t0)) s"
+# A file too coarse for the drape is remeshed by pymeshlab: check that it loads and runs in the image
+# (read-only root, no network), on the same file's first stage only.
+"$PYTHON" -m tests.garment_files "$files/coarse" --edge 0.06 --units cm >/dev/null
+podman "${STORE[@]}" run --rm --runtime runc --network none --read-only --tmpfs /tmp:rw,size=512m \
+    --cap-drop ALL --security-opt no-new-privileges --ulimit "nofile=$(ulimit -Sn):$(ulimit -Hn)" \
+    --ulimit nproc=4096:4096 -v "$files:/in:ro" --entrypoint python3 "$IMAGE" -c '
+from pathlib import Path
+from service.pipeline.body import BodyModel
+from training.garment_import.pipeline import GarmentSpec, prepare
+garment, notes = prepare(Path("/in/coarse/skirt.obj"), GarmentSpec("c", "C", "bottom", 3, "cm"), BodyModel.load())
+print("run: coarse file:", [n for n in notes if "remeshed" in n][0])'
 "$PYTHON" - "$garments" <<'PY'
 import sys
 from service.pipeline.catalog import verified_imports
