@@ -10,6 +10,7 @@ from pathlib import Path
 
 import yaml
 
+from service.process.jit_cache import seed_jit_cache
 from service.server.app import CATALOG_NOT_LOADED, create_app, try_load_catalog
 from service.server.settings import Settings
 
@@ -199,6 +200,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if argv[:2] == ["garments", "import"]:
         return garments_import(argv[2:])
     args = build_parser().parse_args(argv)
+    seed_jit_cache()  # before any compiled kernel runs (a no-op outside the images)
     return args.func(args)
 
 
