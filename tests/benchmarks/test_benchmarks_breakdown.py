@@ -1,4 +1,5 @@
-"""benchmarks/breakdown: its timers count onnxruntime and KD-tree time, and leave the service as it was."""
+"""benchmarks/breakdown: its timers count onnxruntime, KD-tree and numba time, and leave the service as it
+was."""
 
 from __future__ import annotations
 
@@ -17,19 +18,21 @@ def test_timers_count_the_kernels_and_are_removed_after():
     import onnxruntime as ort
 
     before = (ort.InferenceSession.run, service.geometry.closest.cKDTree,
-              service.geometry.closest.QUERY_THREADS, service.pipeline.outfit.FIT_THREADS)  # fmt: skip
+              service.geometry.closest.QUERY_THREADS, service.pipeline.outfit.FIT_THREADS,
+              service.geometry.closest.select)  # fmt: skip
     for key in SPENT:
         SPENT[key] = 0.0
     vertices, faces = grid_mesh(4)
     with _instrumented(1):
         assert service.geometry.closest.QUERY_THREADS == service.pipeline.outfit.FIT_THREADS == 1
         ClosestPoint.build(vertices, faces).query(np.array([[0.3, 0.4, 0.1]]))
-        assert SPENT["kdtree"] > 0 and SPENT["onnxruntime"] == 0
+        assert SPENT["kdtree"] > 0 and SPENT["numba"] > 0 and SPENT["onnxruntime"] == 0
         session = service.process.onnx_session.open_session(models_dir() / "fields" / "body.onnx", 1)
         feeds = {i.name: np.zeros([d if isinstance(d, int) else 1 for d in i.shape], np.float32)
                  for i in session.get_inputs()}  # fmt: skip
         session.run(None, feeds)
         assert SPENT["onnxruntime"] > 0
     after = (ort.InferenceSession.run, service.geometry.closest.cKDTree,
-             service.geometry.closest.QUERY_THREADS, service.pipeline.outfit.FIT_THREADS)  # fmt: skip
+             service.geometry.closest.QUERY_THREADS, service.pipeline.outfit.FIT_THREADS,
+             service.geometry.closest.select)  # fmt: skip
     assert after == before
