@@ -30,6 +30,7 @@ import numpy as np
 from scipy.sparse import csr_matrix
 
 from service.geometry.closest import ClosestPoint
+from service.geometry.closest_kernel import bounding_spheres
 from service.geometry.near_vertices import NeighbourCells
 from service.pipeline.canonical_kernel import transfer_rows
 from service.process.threads import pool
@@ -126,6 +127,7 @@ class CanonicalSpace:
         # The far term's nearest vertices from cell lists built once (~0.7 s, ~16 MB for Anny):
         # the KD-tree's answer at a third of its cost (``service.geometry.near_vertices``).
         self._near = NeighbourCells.build(self.mean_vertices, NEIGHBOURS, self._tree)
+        self._spheres = bounding_spheres(self.mean_vertices, self.faces)
 
     @classmethod
     def build(cls, mean_vertices: np.ndarray, faces: np.ndarray, threads: int = 2) -> CanonicalSpace:
@@ -175,9 +177,9 @@ class CanonicalSpace:
         far_weight = np.empty((n, k))
         near_index, near_weight = np.empty((n, t3), dtype=np.int64), np.empty((n, t3))
         has_near = np.empty(n, dtype=np.bool_)
-        transfer_rows(points, self.mean_vertices, self.faces, self._ring, vdist, far_index, NEAR_VERTICES,
-                      NEAR_TRIANGLES, BLEND_DISTANCE, SIGMA_MIN, SOFTNESS, far_weight, near_index,
-                      near_weight, has_near)  # fmt: skip
+        transfer_rows(points, self.mean_vertices, self.faces, self._spheres, self._ring, vdist, far_index,
+                      NEAR_VERTICES, NEAR_TRIANGLES, BLEND_DISTANCE, SIGMA_MIN, SOFTNESS, far_weight,
+                      near_index, near_weight, has_near)  # fmt: skip
         near = np.flatnonzero(has_near)
         return _TransferRows(far_index, far_weight, near, near_index[near], near_weight[near])
 

@@ -18,12 +18,15 @@ from service.geometry.closest_kernel import barycentric
 
 
 @njit(cache=True, nogil=True)
-def transfer_rows(points, vertices, faces, ring, vdist, far_index, near_vertices, near_triangles, blend,
-                  sigma_min, softness, far_weight, near_index, near_weight, has_near):  # fmt: skip
+def transfer_rows(points, vertices, faces, spheres, ring, vdist, far_index, near_vertices, near_triangles,
+                  blend, sigma_min, softness, far_weight, near_index, near_weight, has_near):  # fmt: skip
     """For ``points (N, 3)`` with their nearest body vertices ``far_index (N, K)`` at ``vdist (N, K)``
     (ascending): the far term's weights into ``far_weight (N, K)``; for the points nearer than
     ``blend`` (``has_near``), the corners ``near_index (N, 3 T)`` and weights ``near_weight (N, 3 T)``
-    of the near term's T = ``near_triangles`` slots (rows of the others are left as they are)."""
+    of the near term's T = ``near_triangles`` slots (rows of the others are left as they are).
+    ``spheres (F, 4)`` bound each triangle (``closest_kernel.bounding_spheres``): one whose sphere is
+    farther than the T-th least slot so far cannot enter the T least, nor be the least, and is not
+    tested (the same result as testing it)."""
     n, k = far_index.shape
     r = ring.shape[1]
     slot_face = np.empty(near_vertices * r, dtype=np.int64)
@@ -36,6 +39,7 @@ def transfer_rows(points, vertices, faces, ring, vdist, far_index, near_vertices
     for i in range(n):
         px, py, pz = points[i, 0], points[i, 1], points[i, 2]
         m = 0
+        count = 0  # slots kept among the near_triangles least so far, ascending in chosen_d
         d0 = np.inf
         for j in range(min(near_vertices, k)):
             v = far_index[i, j]
@@ -43,21 +47,34 @@ def transfer_rows(points, vertices, faces, ring, vdist, far_index, near_vertices
                 f = ring[v, s]
                 if f < 0:
                     break
+                if tested_at[f] != i:
+                    tested_at[f] = i
+                    tested_d[f] = np.inf  # pruned, unless tested below
+                    sx, sy, sz = px - spheres[f, 0], py - spheres[f, 1], pz - spheres[f, 2]
+                    gap = np.sqrt(sx * sx + sy * sy + sz * sz) - spheres[f, 3]
+                    if not (count == near_triangles and gap > chosen_d[count - 1]):
+                        a, b, c = vertices[faces[f, 0]], vertices[faces[f, 1]], vertices[faces[f, 2]]
+                        barycentric(px, py, pz, a, b, c, w)
+                        qx = w[0] * a[0] + w[1] * b[0] + w[2] * c[0]
+                        qy = w[0] * a[1] + w[1] * b[1] + w[2] * c[1]
+                        qz = w[0] * a[2] + w[1] * b[2] + w[2] * c[2]
+                        dx, dy, dz = px - qx, py - qy, pz - qz
+                        tested_d[f] = np.sqrt(dx * dx + dy * dy + dz * dz)
+                        tested_w[f, 0], tested_w[f, 1], tested_w[f, 2] = w[0], w[1], w[2]
+                        d0 = min(d0, tested_d[f])
                 slot_face[m] = f
+                d = tested_d[f]
+                # The near_triangles least slots, in slot order (an equal one later stays out).
+                if not (count == near_triangles and d >= chosen_d[count - 1]):
+                    pos = count if count < near_triangles else near_triangles - 1
+                    while pos > 0 and chosen_d[pos - 1] > d:
+                        if pos < near_triangles:
+                            chosen[pos], chosen_d[pos] = chosen[pos - 1], chosen_d[pos - 1]
+                        pos -= 1
+                    chosen[pos], chosen_d[pos] = m, d
+                    if count < near_triangles:
+                        count += 1
                 m += 1
-                if tested_at[f] == i:
-                    continue
-                tested_at[f] = i
-                a, b, c = vertices[faces[f, 0]], vertices[faces[f, 1]], vertices[faces[f, 2]]
-                barycentric(px, py, pz, a, b, c, w)
-                qx = w[0] * a[0] + w[1] * b[0] + w[2] * c[0]
-                qy = w[0] * a[1] + w[1] * b[1] + w[2] * c[1]
-                qz = w[0] * a[2] + w[1] * b[2] + w[2] * c[2]
-                dx, dy, dz = px - qx, py - qy, pz - qz
-                d = np.sqrt(dx * dx + dy * dy + dz * dz)
-                tested_d[f] = d
-                tested_w[f, 0], tested_w[f, 1], tested_w[f, 2] = w[0], w[1], w[2]
-                d0 = min(d0, d)
         t = min(max(d0 / blend, 0.0), 1.0)
         s_blend = t * t * (3 - 2 * t)  # smoothstep
         # Far term: Gaussian over the nearest vertices, wider further out, times s.
@@ -72,20 +89,6 @@ def transfer_rows(points, vertices, faces, ring, vdist, far_index, near_vertices
         has_near[i] = s_blend < 1
         if not has_near[i]:
             continue
-        # The near_triangles least slots (fewer when there are fewer: the rest weigh 0).
-        count = 0
-        for s in range(m):
-            d = tested_d[slot_face[s]]
-            if count == near_triangles and d >= chosen_d[count - 1]:
-                continue
-            pos = count if count < near_triangles else near_triangles - 1
-            while pos > 0 and chosen_d[pos - 1] > d:
-                if pos < near_triangles:
-                    chosen[pos], chosen_d[pos] = chosen[pos - 1], chosen_d[pos - 1]
-                pos -= 1
-            chosen[pos], chosen_d[pos] = s, d
-            if count < near_triangles:
-                count += 1
         tau = max(softness * d0, 1e-9)
         total = 0.0
         for c in range(count):
