@@ -69,6 +69,19 @@ def barycentric(px, py, pz, a, b, c, out):
         out[0], out[1], out[2] = 1 - v - t, v, t
 
 
+@njit(cache=True, nogil=True, inline="always")
+def closest_on(px, py, pz, vertices, faces, f, w):
+    """(distance, closest point x, y, z) of point p on triangle f, its barycentric coordinates into
+    ``w (3,)``: the reference's ``closest_on_triangles``, einsum and norm, in their order."""
+    a, b, c = vertices[faces[f, 0]], vertices[faces[f, 1]], vertices[faces[f, 2]]
+    barycentric(px, py, pz, a, b, c, w)
+    qx = w[0] * a[0] + w[1] * b[0] + w[2] * c[0]
+    qy = w[0] * a[1] + w[1] * b[1] + w[2] * c[1]
+    qz = w[0] * a[2] + w[1] * b[2] + w[2] * c[2]
+    dx, dy, dz = px - qx, py - qy, pz - qz
+    return np.sqrt(dx * dx + dy * dy + dz * dz), qx, qy, qz
+
+
 @njit(cache=True, nogil=True)
 def select(points, vertices, faces, spheres, ring, near, face_out, bary_out, point_out):
     """For each of ``points (N, 3)``: the closest point among the triangles of ``ring (V, R)`` (padded
@@ -99,13 +112,7 @@ def select(points, vertices, faces, spheres, ring, near, face_out, bary_out, poi
                 gap = np.sqrt(sx * sx + sy * sy + sz * sz) - spheres[f, 3]
                 if gap > best:  # strictly: a tie may still win by ring order
                     continue
-                a, b, c = vertices[faces[f, 0]], vertices[faces[f, 1]], vertices[faces[f, 2]]
-                barycentric(px, py, pz, a, b, c, w)
-                qx = w[0] * a[0] + w[1] * b[0] + w[2] * c[0]
-                qy = w[0] * a[1] + w[1] * b[1] + w[2] * c[1]
-                qz = w[0] * a[2] + w[1] * b[2] + w[2] * c[2]
-                dx, dy, dz = px - qx, py - qy, pz - qz
-                d = np.sqrt(dx * dx + dy * dy + dz * dz)
+                d, qx, qy, qz = closest_on(px, py, pz, vertices, faces, f, w)
                 if d < best:  # strict: the first in ring order wins ties, as argmin
                     best = d
                     face_out[i] = f

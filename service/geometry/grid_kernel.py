@@ -30,6 +30,17 @@ def _cell(x, origin, cell, n):
     return int(np.floor(u))
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _cells(lo, hi, origin, cell, dims):
+    """The cell ranges (x0, x1, y0, y1, z0, z1), inclusive and inside the grid, of box ``lo, hi (3,)``
+    (empty, x1 < x0, where it misses the grid)."""
+    nx, ny, nz = dims[0], dims[1], dims[2]
+    x0, x1 = max(_cell(lo[0], origin[0], cell, nx), 0), min(_cell(hi[0], origin[0], cell, nx), nx - 1)
+    y0, y1 = max(_cell(lo[1], origin[1], cell, ny), 0), min(_cell(hi[1], origin[1], cell, ny), ny - 1)
+    z0, z1 = max(_cell(lo[2], origin[2], cell, nz), 0), min(_cell(hi[2], origin[2], cell, nz), nz - 1)
+    return x0, x1, y0, y1, z0, z1
+
+
 @njit(cache=True, nogil=True)
 def fill(lo, hi, origin, cell, dims):
     """(start (C + 1,), items (E,)): the triangles of boxes ``lo, hi (F, 3)`` in every cell they touch,
@@ -37,23 +48,19 @@ def fill(lo, hi, origin, cell, dims):
     nx, ny, nz = dims[0], dims[1], dims[2]
     count = np.zeros(nx * ny * nz + 1, dtype=np.int64)
     for t in range(len(lo)):
-        x0, x1 = _cell(lo[t, 0], origin[0], cell, nx), _cell(hi[t, 0], origin[0], cell, nx)
-        y0, y1 = _cell(lo[t, 1], origin[1], cell, ny), _cell(hi[t, 1], origin[1], cell, ny)
-        z0, z1 = _cell(lo[t, 2], origin[2], cell, nz), _cell(hi[t, 2], origin[2], cell, nz)
-        for ix in range(max(x0, 0), min(x1, nx - 1) + 1):
-            for iy in range(max(y0, 0), min(y1, ny - 1) + 1):
-                for iz in range(max(z0, 0), min(z1, nz - 1) + 1):
+        x0, x1, y0, y1, z0, z1 = _cells(lo[t], hi[t], origin, cell, dims)
+        for ix in range(x0, x1 + 1):
+            for iy in range(y0, y1 + 1):
+                for iz in range(z0, z1 + 1):
                     count[(ix * ny + iy) * nz + iz + 1] += 1
     start = np.cumsum(count)
     items = np.empty(start[-1], dtype=np.int64)
     at = start[:-1].copy()
     for t in range(len(lo)):
-        x0, x1 = _cell(lo[t, 0], origin[0], cell, nx), _cell(hi[t, 0], origin[0], cell, nx)
-        y0, y1 = _cell(lo[t, 1], origin[1], cell, ny), _cell(hi[t, 1], origin[1], cell, ny)
-        z0, z1 = _cell(lo[t, 2], origin[2], cell, nz), _cell(hi[t, 2], origin[2], cell, nz)
-        for ix in range(max(x0, 0), min(x1, nx - 1) + 1):
-            for iy in range(max(y0, 0), min(y1, ny - 1) + 1):
-                for iz in range(max(z0, 0), min(z1, nz - 1) + 1):
+        x0, x1, y0, y1, z0, z1 = _cells(lo[t], hi[t], origin, cell, dims)
+        for ix in range(x0, x1 + 1):
+            for iy in range(y0, y1 + 1):
+                for iz in range(z0, z1 + 1):
                     c = (ix * ny + iy) * nz + iz
                     items[at[c]] = t
                     at[c] += 1
@@ -105,7 +112,7 @@ def _sphere(t, out):
 def pairs(q_tri, q_lo, q_hi, g_tri, g_normal, g_lo, g_hi, origin, cell, dims, start, items, exact):
     """(K, 2) pairs (query triangle, grid triangle) whose boxes overlap, each once, in query order;
     with ``exact`` only those that cross (``q_tri``, ``g_tri``: (Q, 3, 3), (G, 3, 3) corners)."""
-    nx, ny, nz = dims[0], dims[1], dims[2]
+    ny, nz = dims[1], dims[2]
     stamp = np.full(len(g_lo), -1, dtype=np.int64)
     out = np.empty((max(16, 4 * len(q_lo)), 2), dtype=np.int64)
     m = 0
@@ -113,17 +120,15 @@ def pairs(q_tri, q_lo, q_hi, g_tri, g_normal, g_lo, g_hi, origin, cell, dims, st
     sa = np.empty(4)
     sb = np.empty(4)
     for i in range(len(q_lo)):
-        x0, x1 = _cell(q_lo[i, 0], origin[0], cell, nx), _cell(q_hi[i, 0], origin[0], cell, nx)
-        y0, y1 = _cell(q_lo[i, 1], origin[1], cell, ny), _cell(q_hi[i, 1], origin[1], cell, ny)
-        z0, z1 = _cell(q_lo[i, 2], origin[2], cell, nz), _cell(q_hi[i, 2], origin[2], cell, nz)
+        x0, x1, y0, y1, z0, z1 = _cells(q_lo[i], q_hi[i], origin, cell, dims)
         if exact:
             a, b, c = q_tri[i, 0], q_tri[i, 1], q_tri[i, 2]
             ux, uy, uz = b[0] - a[0], b[1] - a[1], b[2] - a[2]
             vx, vy, vz = c[0] - a[0], c[1] - a[1], c[2] - a[2]
             qn[0], qn[1], qn[2] = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
-        for ix in range(max(x0, 0), min(x1, nx - 1) + 1):
-            for iy in range(max(y0, 0), min(y1, ny - 1) + 1):
-                for iz in range(max(z0, 0), min(z1, nz - 1) + 1):
+        for ix in range(x0, x1 + 1):
+            for iy in range(y0, y1 + 1):
+                for iz in range(z0, z1 + 1):
                     cid = (ix * ny + iy) * nz + iz
                     for s in range(start[cid], start[cid + 1]):
                         j = items[s]

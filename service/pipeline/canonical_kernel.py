@@ -2,7 +2,7 @@
 
 ``transfer_weights_reference`` (``service.pipeline.canonical``) defines the weights with numpy arrays
 of every (point, candidate triangle) slot; here each point works through its own slots in registers:
-Ericson's test (``service.geometry.closest_kernel.barycentric``, the reference's arithmetic) once per
+Ericson's test (``service.geometry.closest_kernel.closest_on``, the reference's arithmetic) once per
 distinct triangle of the rings of its ``near_vertices`` nearest vertices, the least distance d0, the
 ``near_triangles`` least slots (a triangle in several rings keeps a slot per ring, as in the
 reference), their soft-min and the Gaussian far term. The same weights to rounding (the reference
@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from service.geometry.closest_kernel import barycentric
+from service.geometry.closest_kernel import closest_on
 
 
 @njit(cache=True, nogil=True)
@@ -53,13 +53,7 @@ def transfer_rows(points, vertices, faces, spheres, ring, vdist, far_index, near
                     sx, sy, sz = px - spheres[f, 0], py - spheres[f, 1], pz - spheres[f, 2]
                     gap = np.sqrt(sx * sx + sy * sy + sz * sz) - spheres[f, 3]
                     if not (count == near_triangles and gap > chosen_d[count - 1]):
-                        a, b, c = vertices[faces[f, 0]], vertices[faces[f, 1]], vertices[faces[f, 2]]
-                        barycentric(px, py, pz, a, b, c, w)
-                        qx = w[0] * a[0] + w[1] * b[0] + w[2] * c[0]
-                        qy = w[0] * a[1] + w[1] * b[1] + w[2] * c[1]
-                        qz = w[0] * a[2] + w[1] * b[2] + w[2] * c[2]
-                        dx, dy, dz = px - qx, py - qy, pz - qz
-                        tested_d[f] = np.sqrt(dx * dx + dy * dy + dz * dz)
+                        tested_d[f] = closest_on(px, py, pz, vertices, faces, f, w)[0]
                         tested_w[f, 0], tested_w[f, 1], tested_w[f, 2] = w[0], w[1], w[2]
                         d0 = min(d0, tested_d[f])
                 slot_face[m] = f
