@@ -7,7 +7,13 @@ import pytest
 
 from service.pipeline.fields import FieldValues
 from service.pipeline.fit import FitSettings, fit_garment, rows_of
-from service.pipeline.strain import RestShape, green_strain_norms, strain_energy, strain_energy_reference
+from service.pipeline.strain import (
+    RestShape,
+    green_strain_norms,
+    green_strain_norms_reference,
+    strain_energy,
+    strain_energy_reference,
+)
 from service.pipeline.untangle import GAP_DELTA, untangle_with_jacobian
 from tests.meshes import grid_mesh
 
@@ -40,6 +46,9 @@ def test_strain_equals_its_reference_on_a_crumpled_garment_like_sheet():
     e_ref, g_ref = strain_energy_reference(x, rest)
     assert e == pytest.approx(e_ref, rel=1e-12)
     np.testing.assert_allclose(g, g_ref, rtol=1e-10, atol=1e-12 * np.abs(g_ref).max())
+    norms, norms_ref = green_strain_norms(x, rest), green_strain_norms_reference(x, rest)
+    np.testing.assert_allclose(norms, norms_ref, rtol=1e-12)
+    assert e == pytest.approx(float(norms @ norms), rel=1e-12)  # the energy is the norms' squares summed
     # The rest matrices are the inverses of the rest edge matrices in the triangles' own 2-D frames:
     # Dm^-1 maps those edges to (1, 0) and (0, 1), so x = rest gives F^T F = I.
     assert strain_energy(rest_v, rest)[0] == pytest.approx(0, abs=1e-20)
