@@ -48,6 +48,8 @@ KERNELS = (
     ("service.geometry.near_vertices", "_select_k"),
     ("service.pipeline.canonical", "transfer_rows"),
     ("service.pipeline.strain", "_strain_kernel"),
+    ("service.pipeline.strain", "_norms_kernel"),
+    ("service.pipeline.repair", "_clear_of_kernel"),
     ("service.geometry.intersections", "fill"),
     ("service.geometry.intersections", "pairs"),
 )
