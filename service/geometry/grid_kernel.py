@@ -98,7 +98,7 @@ def _edges_cross(t1, t2, n2):
 @njit(cache=True, nogil=True)
 def _sphere(t, out):
     """Centroid and farthest-corner radius of triangle t (3, 3) into out (4,), as
-    ``intersections.bounding_spheres``."""
+    ``intersections.candidate_pairs`` computes them."""
     for d in range(3):
         out[d] = (t[0, d] + t[1, d] + t[2, d]) / 3
     r = 0.0

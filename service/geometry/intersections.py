@@ -90,19 +90,6 @@ def _crossing(ca: list[np.ndarray], cb: list[np.ndarray], na: np.ndarray, nb: np
     return hit
 
 
-def bounding_spheres(corners: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Centroids ``(T, 3)`` and radii ``(T,)`` (farthest corner) of triangles ``corners (T, 3, 3)``,
-    computed as ``candidate_pairs`` computes them (the same bits)."""
-    centre = corners.mean(axis=1)
-    return centre, np.linalg.norm(corners - centre[:, None], axis=2).max(axis=1)
-
-
-def _corners(vertices: np.ndarray, faces: np.ndarray) -> list[np.ndarray]:
-    """The three corners ``(F, 3)`` of triangles ``faces (F, 3)`` over ``vertices (V, 3)``, each
-    contiguous: arithmetic on (F, 3) views strided by a triangle costs several times more."""
-    return [np.take(vertices, faces[:, k], axis=0) for k in range(3)]
-
-
 def _normals(corner: list[np.ndarray]) -> np.ndarray:
     """``cross(b - a, c - a)`` ``(F, 3)`` of triangles with corners ``a, b, c (F, 3)``."""
     return cross(corner[1] - corner[0], corner[2] - corner[0])
