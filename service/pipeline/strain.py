@@ -70,20 +70,29 @@ def strain_energy(x: np.ndarray, rest: RestShape) -> tuple[float, np.ndarray]:
     return float(energy), grad
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _green_strain(x, faces, dm_inv, t):
+    """Triangle t's deformation gradient F = Ds Dm^-1 by columns (p, q: 3 components each) and its
+    Green strain E = (F^T F - I) / 2 (e00, e01, e11), as a flat tuple of 9."""
+    i, j, k = faces[t, 0], faces[t, 1], faces[t, 2]
+    m00, m01, m10, m11 = dm_inv[t, 0, 0], dm_inv[t, 0, 1], dm_inv[t, 1, 0], dm_inv[t, 1, 1]
+    ax, ay, az = x[j, 0] - x[i, 0], x[j, 1] - x[i, 1], x[j, 2] - x[i, 2]  # the columns of Ds
+    bx, by, bz = x[k, 0] - x[i, 0], x[k, 1] - x[i, 1], x[k, 2] - x[i, 2]
+    p0, p1, p2 = ax * m00 + bx * m10, ay * m00 + by * m10, az * m00 + bz * m10
+    q0, q1, q2 = ax * m01 + bx * m11, ay * m01 + by * m11, az * m01 + bz * m11
+    e00 = 0.5 * (p0 * p0 + p1 * p1 + p2 * p2 - 1.0)
+    e01 = 0.5 * (p0 * q0 + p1 * q1 + p2 * q2)
+    e11 = 0.5 * (q0 * q0 + q1 * q1 + q2 * q2 - 1.0)
+    return p0, p1, p2, q0, q1, q2, e00, e01, e11
+
+
 @njit(cache=True, nogil=True)
 def _strain_kernel(x, faces, dm_inv, grad):
     energy = 0.0
     for t in range(len(faces)):
         i, j, k = faces[t, 0], faces[t, 1], faces[t, 2]
         m00, m01, m10, m11 = dm_inv[t, 0, 0], dm_inv[t, 0, 1], dm_inv[t, 1, 0], dm_inv[t, 1, 1]
-        # The columns of Ds, then F = Ds Dm^-1 by columns (f0, f1)
-        ax, ay, az = x[j, 0] - x[i, 0], x[j, 1] - x[i, 1], x[j, 2] - x[i, 2]
-        bx, by, bz = x[k, 0] - x[i, 0], x[k, 1] - x[i, 1], x[k, 2] - x[i, 2]
-        p0, p1, p2 = ax * m00 + bx * m10, ay * m00 + by * m10, az * m00 + bz * m10
-        q0, q1, q2 = ax * m01 + bx * m11, ay * m01 + by * m11, az * m01 + bz * m11
-        e00 = 0.5 * (p0 * p0 + p1 * p1 + p2 * p2 - 1.0)
-        e01 = 0.5 * (p0 * q0 + p1 * q1 + p2 * q2)
-        e11 = 0.5 * (q0 * q0 + q1 * q1 + q2 * q2 - 1.0)
+        p0, p1, p2, q0, q1, q2, e00, e01, e11 = _green_strain(x, faces, dm_inv, t)
         energy += e00 * e00 + 2.0 * e01 * e01 + e11 * e11
         # d||E||^2 / dDs = 2 F E Dm^-T: columns g0, g1 (E symmetric), per coordinate
         for d, fp, fq in ((0, p0, q0), (1, p1, q1), (2, p2, q2)):
@@ -128,15 +137,7 @@ def green_strain_norms(x: np.ndarray, rest: RestShape) -> np.ndarray:
 @njit(cache=True, nogil=True)
 def _norms_kernel(x, faces, dm_inv, out):
     for t in range(len(faces)):
-        i, j, k = faces[t, 0], faces[t, 1], faces[t, 2]
-        m00, m01, m10, m11 = dm_inv[t, 0, 0], dm_inv[t, 0, 1], dm_inv[t, 1, 0], dm_inv[t, 1, 1]
-        ax, ay, az = x[j, 0] - x[i, 0], x[j, 1] - x[i, 1], x[j, 2] - x[i, 2]
-        bx, by, bz = x[k, 0] - x[i, 0], x[k, 1] - x[i, 1], x[k, 2] - x[i, 2]
-        p0, p1, p2 = ax * m00 + bx * m10, ay * m00 + by * m10, az * m00 + bz * m10
-        q0, q1, q2 = ax * m01 + bx * m11, ay * m01 + by * m11, az * m01 + bz * m11
-        e00 = 0.5 * (p0 * p0 + p1 * p1 + p2 * p2 - 1.0)
-        e01 = 0.5 * (p0 * q0 + p1 * q1 + p2 * q2)
-        e11 = 0.5 * (q0 * q0 + q1 * q1 + q2 * q2 - 1.0)
+        e00, e01, e11 = _green_strain(x, faces, dm_inv, t)[6:]
         out[t] = np.sqrt(e00 * e00 + 2.0 * e01 * e01 + e11 * e11)
 
 
