@@ -45,8 +45,9 @@ class Embedding:
     offset: np.ndarray
 
     @classmethod
-    def build(cls, points: np.ndarray, vertices: np.ndarray, faces: np.ndarray, face: np.ndarray,
-              bary: np.ndarray) -> Embedding:
+    def build(
+        cls, points: np.ndarray, vertices: np.ndarray, faces: np.ndarray, face: np.ndarray, bary: np.ndarray
+    ) -> Embedding:
         """The embedding that ``place``s ``points (D, 3)`` where they are over ``vertices``, ``faces``,
         given the face and barycentric coordinates each is attached to (its closest point)."""  # fmt: skip
         on = np.einsum("dk,dkx->dx", bary, vertices[faces[face]])

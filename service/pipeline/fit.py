@@ -17,6 +17,13 @@ The cost is the networks, so (DESIGN.md section 5):
   +-``trust`` around the linearisation point; ``outer`` re-linearisations follow.
 The gradient chains through the untangler and every layer's field gradient:
 d f_i / dx = sum_k (d O_i / d f*_k) grad f*_k(x) + (d O_i / d h*_k) grad h*_k(x).
+
+The garment's own layer comes from its explicit mesh, not its network (``own_field = "mesh"``,
+``OwnField``): X* is that field's zero set by definition, so f_i at a vertex moved by d is n . d (the
+signed distance to the tangent plane of X* there, n the vertex normal), exact where the learned f_i is
+1-3.5 mm off its own mesh (mean over the catalog's garments); and a vertex keeps its own covariant value
+h_i(X*) (a property of the cloth point: how far it is from an opening along the garment), evaluated
+once. The own layer's gradient graph, the costliest call of a fit, is never run.
 """
 
 from __future__ import annotations
@@ -26,10 +33,11 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Protocol
+from typing import Literal, Protocol
 
 import numpy as np
 
+from service.geometry.mesh import vertex_normals
 from service.pipeline.fields import FieldValues
 from service.pipeline.lbfgs import minimize_lbfgs
 from service.pipeline.strain import RestShape, strain_energy
@@ -82,6 +90,25 @@ class FitSettings:
     """m: longest Newton step a vertex starts its L-BFGS from."""
     reach: float = 0.03
     """m: a garment layer farther than this from a point takes no part in its untangling."""
+    own_field: Literal["mesh", "network"] = "mesh"
+    """Where the fitted garment's own f_i and its gradient come from: its explicit mesh (``OwnField``)
+    or its network, as for the other layers."""
+
+
+@dataclass(frozen=True)
+class OwnField:
+    """The fitted garment's own fields at its vertices, from its explicit mesh ``rest (V, 3)``: f = n . (x -
+    rest) with ``normals (V, 3)`` its unit vertex normals (pointing to f > 0), h its covariant value at
+    rest ``h (V,)``, constant (module docstring)."""
+
+    rest: np.ndarray
+    normals: np.ndarray
+    h: np.ndarray
+
+    def at(self, idx: np.ndarray, x: np.ndarray) -> FieldValues:
+        """Fields of vertices ``idx (P,)`` at positions ``x (P, 3)``, with gradients."""
+        n = self.normals[idx]
+        return FieldValues(np.einsum("nd,nd->n", n, x - self.rest[idx]), self.h[idx], n, np.zeros_like(n))
 
 
 @dataclass
@@ -97,7 +124,8 @@ class FitResult:
     rest: RestShape | None = None  # of the explicit mesh: the report's strain is measured against it
     values: tuple[np.ndarray, np.ndarray] | None = None
     """(f*, h*) ``(V, N)`` of every layer at the returned vertices, h* as the networks answer (far
-    layers not made inactive), for the later stages to reuse; None when ``ok`` is False."""
+    layers not made inactive; the garment's own column from ``OwnField`` when the settings say so),
+    for the later stages to reuse; None when ``ok`` is False."""
 
 
 def vertex_neighbours(faces: np.ndarray, n_vertices: int):
@@ -161,7 +189,11 @@ def fit_garment(
     clock = _Clock(seconds)
     with clock("fields"):
         f_star, h_raw = _values(fields, n_layers, x0)
-        h_star = np.where(far_layers(f_star, layer, settings.reach), INACTIVE, h_raw)
+    own = None
+    if settings.own_field == "mesh":
+        own = OwnField(x0, vertex_normals(x0, faces), h_raw[:, layer].copy())
+        f_star[:, layer] = 0.0  # n . (x0 - x0)
+    h_star = np.where(far_layers(f_star, layer, settings.reach), INACTIVE, h_raw)
     if not (np.all(np.isfinite(f_star)) and np.all(np.isfinite(h_raw))):
         # A network answered NaN or inf: nothing to fit against; the explicit mesh, flagged.
         return FitResult(x0.copy(), np.zeros(len(x0), dtype=bool), 0, 0, np.nan, np.nan, seconds, False)
@@ -185,7 +217,7 @@ def fit_garment(
             # Only triangles touching an optimised vertex change: the strain of the rest is constant.
             rest, touched = full_rest.subset(near), near
         with clock("fields"):
-            lin = _linearise(fields, n_layers, x[idx], f_star[idx], layer, settings.reach)
+            lin = _linearise(fields, n_layers, x[idx], f_star[idx], layer, settings.reach, own, idx)
         if lin is None:
             ok = False  # a network answered NaN or inf: keep the last valid iterate
             break
@@ -205,7 +237,9 @@ def fit_garment(
             break
         x[idx] = y
         with clock("fields"):
-            f_new, h_new = _values(fields, n_layers, x[idx])
+            f_new, h_new = _values(
+                fields, n_layers, x[idx], None if own is None else (layer, own.at(idx, x[idx]))
+            )
         if not (np.all(np.isfinite(f_new)) and np.all(np.isfinite(h_new))):
             ok = False
             break
@@ -218,15 +252,18 @@ def fit_garment(
     return FitResult(x, optimised, iterations, linearisations, before, after, seconds, ok, full_rest, values)
 
 
-def _values(fields: LayerFields, n_layers: int, x: np.ndarray):
-    """f*, h* ``(P, N)`` of every layer at ``x (P, 3)``, values only."""
-    vals = [fields(k, x, False) for k in range(n_layers)]
+def _values(fields: LayerFields, n_layers: int, x: np.ndarray, known: tuple[int, FieldValues] | None = None):
+    """f*, h* ``(P, N)`` of every layer at ``x (P, 3)``, values only; ``known`` = (layer, its values)
+    is not evaluated."""
+    vals = [known[1] if known and k == known[0] else fields(k, x, False) for k in range(n_layers)]
     return np.stack([v.f for v in vals], 1), np.stack([v.h for v in vals], 1)
 
 
-def _linearise(fields: LayerFields, n_layers: int, x: np.ndarray, f_now: np.ndarray, layer: int, reach):
+def _linearise(fields: LayerFields, n_layers: int, x: np.ndarray, f_now: np.ndarray, layer: int, reach,
+               own: OwnField | None = None, idx: np.ndarray | None = None):  # fmt: skip
     """Fields of every layer at ``x (P, 3)`` with x-gradients, for the linearisation: (f*, h* (P, N),
-    grad f*, grad h* (P, N, 3)), or None if a network answered NaN or inf.
+    grad f*, grad h* (P, N, 3)), or None if a network answered NaN or inf. With ``own``, layer
+    ``layer``'s come from it at the vertices ``idx (P,)``.
 
     ``f_now (P, N)`` are the current values: a layer farther than ``reach`` from a point is inactive
     there (``far_layers``), a constant of the fit, so its gradients are 0 and are not evaluated (the
@@ -239,7 +276,7 @@ def _linearise(fields: LayerFields, n_layers: int, x: np.ndarray, f_now: np.ndar
         near = np.flatnonzero(~far[:, k])
         if not len(near):
             continue
-        v = fields(k, x[near], True)
+        v = own.at(idx, x) if own is not None and k == layer else fields(k, x[near], True)
         if not all(np.all(np.isfinite(a)) for a in v):
             return None
         fl[near, k], hl[near, k], grad_f[near, k], grad_h[near, k] = v

@@ -106,7 +106,7 @@ class OutfitModels:
         if kind == "neural":
 
             def neural(f_star, h_star, jacobian, row=None):
-                out = self.neural_untangler(f_star, h_star, jacobian=jacobian, row=row)
+                out = self.neural_untangler.screened(f_star, h_star, jacobian=jacobian, row=row)
                 return out.f, out.jacobian
 
             return neural

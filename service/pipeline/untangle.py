@@ -169,6 +169,22 @@ def untangle_with_jacobian(f_star, h_star, jacobian: bool = True, delta: float =
     return f, jac
 
 
+def settled(f_star: np.ndarray, h_star: np.ndarray, delta: float, band: float, slack: float) -> np.ndarray:
+    """``(B,) bool``: points whose untangled fields are f* for every active set an operator blending
+    layers in over ``|h*| < band`` can see: the layers with h* < band (and the body), taken as active,
+    already lie ``delta + slack`` apart, consecutive pair by consecutive pair. Then so does any subset
+    of them (gaps add up), so the projection (``untangle``) is the identity there, and a learned operator
+    is trusted only ``slack`` away from its kinks. ``f_star``, ``h_star`` ``(B, N)``, layer 0 the body."""
+    f_star, h_star = np.asarray(f_star), np.asarray(h_star)
+    ok = np.ones(len(f_star), dtype=bool)
+    inner = f_star[:, 0].copy()  # f* of the last possibly active layer so far
+    for k in range(1, f_star.shape[1]):
+        maybe = h_star[:, k] < band
+        ok &= ~maybe | (inner - f_star[:, k] >= delta + slack)
+        inner = np.where(maybe, f_star[:, k], inner)
+    return ok
+
+
 def untangle_minmax(f_star, h_star, weights=None, delta: float = GAP_DELTA) -> np.ndarray:
     """Untangled fields ``(B, N)`` by the min-max formula; the reference for ``untangle``.
 

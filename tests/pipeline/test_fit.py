@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from service.geometry.mesh import vertex_normals
 from service.pipeline.fields import FieldValues
 from service.pipeline.fit import FitSettings, fit_garment, rows_of
 from service.pipeline.strain import (
@@ -207,10 +208,50 @@ def test_the_values_a_fit_returns_are_the_fields_at_its_vertices():
     fields = planes([0.0, 0.010, 0.008])
     res = fit_garment(v, f, 2, 3, fields, reference)
     assert res.ok and res.optimised.any()
-    for k in range(3):
+    for k in (0, 1):
         now = fields(k, res.vertices, False)
         np.testing.assert_allclose(res.values[0][:, k], now.f, atol=1e-15)
         np.testing.assert_array_equal(res.values[1][:, k], now.h)
+    # The garment's own layer from its explicit mesh: the distance to the tangent plane at each vertex
+    # (the sheet's +z normal), its h at rest.
+    normals = vertex_normals(v, f)
+    np.testing.assert_allclose(np.abs(normals[:, 2]), 1)
+    own = np.einsum("nd,nd->n", normals, res.vertices - v)
+    np.testing.assert_allclose(res.values[0][:, 2], own, atol=1e-15)
+    np.testing.assert_array_equal(res.values[1][:, 2], fields(2, v, False).h)
+    # With the network's own field, that column is the field's too.
+    res = fit_garment(v, f, 2, 3, fields, reference, FitSettings(own_field="network"))
+    np.testing.assert_allclose(res.values[0][:, 2], fields(2, res.vertices, False).f, atol=1e-15)
+
+
+def test_the_own_field_from_the_mesh_is_the_distance_to_the_tangent_plane_and_never_runs_its_network():
+    # A curved sheet (a cylinder patch of radius 5 cm, like a sleeve): the own values at vertices moved
+    # along their normals by s are s; moved along the surface, 0; the own layer's gradient is never asked.
+    v, f = _sheet(n=8)
+    radius = 0.05
+    angle = v[:, 0] / radius
+    v = np.stack([radius * np.sin(angle), v[:, 1], radius * np.cos(angle)], axis=1)
+    normals = vertex_normals(v, f)
+    from service.pipeline.fit import OwnField
+
+    own = OwnField(v, normals, np.full(len(v), -0.2))
+    idx = np.arange(len(v))
+    out = own.at(idx, v + 0.003 * normals)
+    np.testing.assert_allclose(out.f, 0.003, rtol=1e-12)
+    tangent = np.cross(normals, [0.0, 1.0, 0.0])
+    np.testing.assert_allclose(own.at(idx, v + 0.003 * tangent).f, 0, atol=1e-15)
+    np.testing.assert_array_equal(out.grad_f, normals)
+    assert np.all(out.grad_h == 0) and np.all(out.h == -0.2)
+    asked = []
+    flat = planes([-1.0, 0.04, 0.05])
+
+    def fields(k, x, gradient):
+        asked.append((k, gradient))
+        return flat(k, x, gradient)
+
+    res = fit_garment(v, f, 2, 3, fields, reference)
+    assert res.ok and res.optimised.any()
+    assert (2, True) not in asked and (1, True) in asked
 
 
 def test_kept_adjacency_equals_a_fresh_one():

@@ -20,6 +20,7 @@ from service.pipeline.untangle import (
     GAP_DELTA,
     active_layers,
     default_weights,
+    settled,
     untangle,
     untangle_jacobian,
     untangle_minmax,
@@ -32,6 +33,7 @@ from service.pipeline.untangle_onnx import (
     NEAR_SURFACE,
     PAD_F,
     PAD_H,
+    SETTLED_SLACK,
     NeuralUntangler,
 )
 from training.untangler_data import SAMPLERS, sample_layered
@@ -411,3 +413,51 @@ def test_service_does_not_import_torch():
 def test_default_weights():
     w = default_weights(3)
     assert np.isinf(w[0]) and np.all(w[1:] == 1.0)
+
+
+def test_settled_points_are_left_unchanged_by_the_projection_for_every_active_set():
+    # settled == the projection with gap delta + slack, every possibly active layer active, moves
+    # nothing (gaps between consecutive layers add up, so every subset is then feasible too).
+    rng = np.random.default_rng(95)
+    delta, band, slack = GAP_DELTA, 0.01, 0.002
+    # 0.1 mm steps plus 0.03 mm per layer: no gap between two layers within 1e-5 of the bound
+    f = np.round(rng.normal(scale=0.012, size=(20_000, 4)), 4) + 3e-5 * np.arange(4)
+    h = rng.choice([-0.05, -0.004, 0.003, 0.05], size=f.shape)  # in and out of the band
+    ok = settled(f, h, delta, band, slack)
+    strict = np.where(h < band, -1.0, 1.0)
+    moved = np.abs(untangle(f, strict, delta=delta + slack) - f).max(axis=1) > 1e-9
+    np.testing.assert_array_equal(ok, ~moved)
+    assert 0.05 < ok.mean() < 0.95
+    for _ in range(8):  # any active subset the blend can see: the exact operator is the identity
+        active = np.where((h < band) & (rng.random(f.shape) < 0.5), -1.0, 1.0)
+        np.testing.assert_allclose(untangle(f[ok], active[ok], delta=delta), f[ok], rtol=0, atol=1e-12)
+
+
+def test_screened_is_the_network_where_something_can_move_and_the_identity_elsewhere(neural):
+    rng = np.random.default_rng(96)
+    f, h = sample_layered(rng, 4000)
+    h[:2000, 1:] = rng.uniform(-2, 2, (2000, N_SLOTS - 1)) * neural.h_band
+    f[::3, 1:] = f[::3, :1] - np.arange(1, N_SLOTS) * 0.02  # well apart: settled
+    ok = settled(f, h, neural.delta, neural.h_band, SETTLED_SLACK)
+    assert 0.2 < ok.mean() < 0.8
+    for n in (N_SLOTS, 3):
+        fn, hn = f[:, :n], h[:, :n]
+        ok = settled(fn, hn, neural.delta, neural.h_band, SETTLED_SLACK)
+        full, plain = neural.screened(fn, hn), neural(fn[~ok], hn[~ok])
+        np.testing.assert_array_equal(full.f[~ok], plain.f)
+        np.testing.assert_array_equal(full.jacobian[~ok], plain.jacobian)
+        np.testing.assert_array_equal(full.f[ok], fn[ok])
+        np.testing.assert_array_equal(full.jacobian[ok], np.tile(np.eye(n, 2 * n), (ok.sum(), 1, 1)))
+        # The network agrees with the identity at settled points far from every blend band.
+        clear = ok & np.all((np.abs(hn[:, 1:]) > 2 * neural.h_band), axis=1)
+        assert np.abs(neural(fn[clear], hn[clear], jacobian=False).f - fn[clear]).max() < 1e-3
+        for k in range(n):
+            row = neural.screened(fn, hn, row=k)
+            np.testing.assert_array_equal(row.f, full.f)
+            np.testing.assert_array_equal(row.jacobian[~ok], neural(fn[~ok], hn[~ok], row=k).jacobian)
+            np.testing.assert_array_equal(row.jacobian[ok, 0], np.tile(np.eye(2 * n)[k], (ok.sum(), 1)))
+        assert neural.screened(fn, hn, jacobian=False).jacobian is None
+    with pytest.raises(ValueError, match="row must be a layer"):
+        neural.screened(f, h, row=7)
+    everything = neural.screened(f[:0], h[:0])  # no points at all
+    assert everything.f.shape == (0, N_SLOTS)
