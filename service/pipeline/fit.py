@@ -21,9 +21,10 @@ d f_i / dx = sum_k (d O_i / d f*_k) grad f*_k(x) + (d O_i / d h*_k) grad h*_k(x)
 The garment's own layer comes from its explicit mesh, not its network (``own_field = "mesh"``,
 ``OwnField``): X* is that field's zero set by definition, so f_i at a vertex moved by d is n . d (the
 signed distance to the tangent plane of X* there, n the vertex normal), exact where the learned f_i is
-1-3.5 mm off its own mesh (mean over the catalog's garments); and a vertex keeps its own covariant value
-h_i(X*) (a property of the cloth point: how far it is from an opening along the garment), evaluated
-once. The own layer's gradient graph, the costliest call of a fit, is never run.
+1-3.5 mm off its own mesh (mean over the catalog's garments); and the garment is active at each of its
+own vertices (h_i = ``OWN_H``, constant): h_i says where a garment is present, and a garment is present
+at its own cloth points, rims included (its learned h_i blends it out over the centimetre next to an
+opening, so a hem under a jacket was only half untangled). No network runs for the own layer.
 """
 
 from __future__ import annotations
@@ -44,6 +45,7 @@ from service.pipeline.strain import RestShape, strain_energy
 
 # fields(layer, x (P, 3), gradient) -> FieldValues
 INACTIVE = 0.1  # h of a layer made inactive: the fields' saturation value, inside the untangler's range
+OWN_H = -1.0  # h of the fitted garment at its own vertices: active (the body's value)
 LayerFields = Callable[[int, np.ndarray, bool], FieldValues]
 FullUntangler = Callable[[np.ndarray, np.ndarray, bool], tuple[np.ndarray, np.ndarray | None]]
 
@@ -91,15 +93,15 @@ class FitSettings:
     reach: float = 0.03
     """m: a garment layer farther than this from a point takes no part in its untangling."""
     own_field: Literal["mesh", "network"] = "mesh"
-    """Where the fitted garment's own f_i and its gradient come from: its explicit mesh (``OwnField``)
-    or its network, as for the other layers."""
+    """Where the fitted garment's own fields and their gradients come from: its explicit mesh
+    (``OwnField``) or its network, as for the other layers."""
 
 
 @dataclass(frozen=True)
 class OwnField:
     """The fitted garment's own fields at its vertices, from its explicit mesh ``rest (V, 3)``: f = n . (x -
-    rest) with ``normals (V, 3)`` its unit vertex normals (pointing to f > 0), h its covariant value at
-    rest ``h (V,)``, constant (module docstring)."""
+    rest) with ``normals (V, 3)`` its unit vertex normals (pointing to f > 0), h ``(V,)`` constant
+    (``OWN_H``; module docstring)."""
 
     rest: np.ndarray
     normals: np.ndarray
@@ -187,12 +189,14 @@ def fit_garment(
     seconds = {"fields": 0.0, "untangle": 0.0, "optimise": 0.0}
     adjacency = vertex_neighbours(faces, len(x0))
     clock = _Clock(seconds)
-    with clock("fields"):
-        f_star, h_raw = _values(fields, n_layers, x0)
     own = None
     if settings.own_field == "mesh":
-        own = OwnField(x0, vertex_normals(x0, faces), h_raw[:, layer].copy())
-        f_star[:, layer] = 0.0  # n . (x0 - x0)
+        own = OwnField(x0, vertex_normals(x0, faces), np.full(len(x0), OWN_H))
+    everything = np.arange(len(x0))
+    with clock("fields"):
+        f_star, h_raw = _values(
+            fields, n_layers, x0, None if own is None else (layer, own.at(everything, x0))
+        )
     h_star = np.where(far_layers(f_star, layer, settings.reach), INACTIVE, h_raw)
     if not (np.all(np.isfinite(f_star)) and np.all(np.isfinite(h_raw))):
         # A network answered NaN or inf: nothing to fit against; the explicit mesh, flagged.

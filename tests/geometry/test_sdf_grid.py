@@ -68,3 +68,26 @@ def test_committed_body_grid_matches_the_exact_distance_where_garments_are():
     err = check(SdfGrid.load(models_dir() / FILE), space)
     assert err["points"] > 10_000
     assert err["p99"] <= TOLERANCE_MM and err["mean"] < 0.1
+
+
+def test_compiled_lookup_equals_the_numpy_reference_bit_for_bit(grid):
+    # Inside, on cell faces and corners, outside the box, deep inside (clipped), and NaN: all through
+    # both, the same arrays.
+    rng = np.random.default_rng(2)
+    x = np.concatenate([
+        rng.uniform(-0.25, 0.25, (20_000, 3)),
+        np.round(rng.uniform(-0.2, 0.2, (2000, 3)) / 0.006) * 0.006 - 0.2 % 0.006,  # on grid planes
+        [[0.0, 0.0, 0.001], [0.2, 0.2, 0.2], [-0.2, -0.2, -0.2], [np.nan, 0.0, 0.0]],
+    ])  # fmt: skip
+
+    def fallback(p):
+        return np.where(np.isnan(p[:, 0]), 7.0, sphere(np.nan_to_num(p, nan=0.1))[0]), sphere(
+            np.nan_to_num(p, nan=0.1)
+        )[1]
+
+    value, gradient = grid(x, fallback)
+    with np.errstate(invalid="ignore"):  # the NaN point's cell index
+        ref_value, ref_gradient = grid.call_reference(x, fallback)
+    np.testing.assert_array_equal(value, ref_value)
+    np.testing.assert_array_equal(gradient, ref_gradient)
+    assert value[-1] == 7.0
