@@ -105,14 +105,16 @@ def test_a_field_answering_nan_gives_the_explicit_mesh_and_a_flag(models, held_o
 
     real = models.fields.__class__.__call__
 
-    def nan_for_tshirt(self, field_id, x, beta, gradient=False):
+    def nan_for_jacket(self, field_id, x, beta, gradient=False):
         out = real(self, field_id, x, beta, gradient)
-        if field_id != "tshirt":
+        if field_id != "jacket":
             return out
         return FieldValues(*(None if a is None else np.full_like(a, np.nan) for a in out))
 
-    monkeypatch.setattr(models.fields.__class__, "__call__", nan_for_tshirt)
-    outfit = make_outfit(models, ["tshirt"], held_out_beta, measure=False)
+    # A fit never asks its own garment's network (its own layer comes from its mesh): the jacket's
+    # NaN reaches the T-shirt's fit only.
+    monkeypatch.setattr(models.fields.__class__, "__call__", nan_for_jacket)
+    outfit = make_outfit(models, ["tshirt", "jacket"], held_out_beta, measure=False)
     assert outfit.report["fallback"] == ["tshirt"]
     assert all(np.all(np.isfinite(v)) for _, v, _ in outfit.garments)
     json.dumps(outfit.report, allow_nan=False)  # what an HTTP answer needs
