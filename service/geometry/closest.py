@@ -297,11 +297,15 @@ class KeptQueries:
         they were last asked."""
         stale = ask[np.any(x[ask] != self.points[ask], axis=1)]
         if len(stale):
-            q = self.mesh.query(x[stale])
-            self.points[stale] = x[stale]
-            self.signed[stale], self.point[stale], self.normal[stale] = q.signed, q.point, q.normal
-            self.rim[stale] = self.mesh.on_boundary(q)
+            self.store(x, stale, self.mesh.query(x[stale]))
         return self.signed[ask], self.point[ask], self.normal[ask], self.rim[ask]
+
+    def store(self, x: np.ndarray, idx: np.ndarray, q: Closest) -> None:
+        """Keep ``q``, the mesh's answer for the points ``idx (K,)`` of ``x (n, 3)`` (asked by the
+        caller, e.g. in one batch with other point sets)."""
+        self.points[idx] = x[idx]
+        self.signed[idx], self.point[idx], self.normal[idx] = q.signed, q.point, q.normal
+        self.rim[idx] = self.mesh.on_boundary(q)
 
 
 def signed_distance(closest: ClosestPoint, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -50,6 +50,8 @@ class Inner:
     """(V,) bool: the near vertices that may be inside it or within the margin, whose closest points
     the pushes need (None: all near ones). Vertices of triangles found crossing it are asked too,
     whatever this says: the exact crossing tests cover every near triangle."""
+    kept: KeptQueries | None = None
+    """Closest points on ``mesh`` already asked for (of these V vertices), or None: none yet."""
 
 
 @dataclass(frozen=True)
@@ -191,7 +193,7 @@ def repair_layer(
         corners[faces[t].ravel()] = True
         around = _faces_around(layer.mesh, x[corners], settings.band)
         grids.append(TriangleGrid.build(layer.mesh.vertices, layer.mesh.faces[around]))
-    queries = [KeptQueries(layer.mesh, len(x)) for layer in inner]
+    queries = [layer.kept or KeptQueries(layer.mesh, len(x)) for layer in inner]
     # Crossing pairs (tested triangle, inner triangle) of each layer, and the vertices they were
     # found at: a triangle none of whose vertices moved keeps its pairs (the inner layers are fixed).
     hits = [np.zeros((0, 2), dtype=np.int64) for _ in inner]

@@ -9,9 +9,11 @@ vertices can be near a layer, and where it covers them, comes from the fields at
 
 from __future__ import annotations
 
+from dataclasses import fields
+
 import numpy as np
 
-from service.geometry.closest import ClosestPoint
+from service.geometry.closest import Closest, ClosestPoint, KeptQueries
 from service.pipeline.repair import REACH, Inner, RepairSettings, repair_layer
 from service.pipeline.squeeze import Outer, SqueezeSettings, squeeze_layer
 
@@ -93,16 +95,26 @@ def _repair(models, layer_ids, beta, body: ClosestPoint, explicit, fitted, fit_w
     s is looked for within ``REACH`` + s."""
     inner = [(body, True, 0.0)]
     out, results = [], []
+    # The body never moves, and every layer's first pushes ask it about the layer's vertices where
+    # the squeeze left them: those queries go in one batch, which the query's blocks spread over both
+    # cores (a layer's own batch is often below a block); the same answers, kept for each layer.
+    masks = []
+    for i in range(len(world)):
+        f_body = _field_at(models, layer_ids, beta, fitted, 0, i)[0]
+        # The body's distance is exact (canonical, a grid): only vertices it puts within
+        # max_margin + BODY_QUERY_PAD can be within a margin of the body in world space.
+        masks.append((f_body < REACH, f_body < settings.max_margin + BODY_QUERY_PAD))
+    kept_body = _asked_together(body, world, [np.flatnonzero(near & query) for near, query in masks])
     for i, (x, f) in enumerate(zip(world, faces, strict=True)):
         layers = []
         for k, (mesh, closed, moved) in enumerate(inner):
+            if closed:
+                near, query = masks[i]
+                layers.append(Inner(mesh, True, near, np.ones(len(x), dtype=bool), query, kept_body[i]))
+                continue
             f_k, h_k = _field_at(models, layer_ids, beta, fitted, k, i)
-            reach = REACH + moved
-            near = f_k < reach if closed else np.abs(f_k) < reach
-            # The body's distance is exact (canonical, a grid): only vertices it puts within
-            # max_margin + BODY_QUERY_PAD can be within a margin of the body in world space.
-            query = f_k < settings.max_margin + BODY_QUERY_PAD if closed else None
-            layers.append(Inner(mesh, closed, near, h_k < 0, query))
+            near = np.abs(f_k) < REACH + moved
+            layers.append(Inner(mesh, closed, near, h_k < 0))
         r = repair_layer(x, f, layers, settings)
         out.append(r.vertices if np.all(np.isfinite(r.vertices)) else x)
         results.append(r)
@@ -113,3 +125,21 @@ def _repair(models, layer_ids, beta, body: ClosestPoint, explicit, fitted, fit_w
         moved = 1.2 * fit_move + float(np.linalg.norm(out[-1] - fit_world[i], axis=1).max())
         inner.append((ClosestPoint.build(out[-1], f), False, moved))
     return out, results
+
+
+def _asked_together(
+    mesh: ClosestPoint, point_sets: list[np.ndarray], asked: list[np.ndarray]
+) -> list[KeptQueries]:
+    """``KeptQueries`` of ``mesh`` for each of ``point_sets (V_i, 3)`` holding the answers for its points
+    ``asked[i] (K_i,)``, all asked in one query."""
+    kept = [KeptQueries(mesh, len(x)) for x in point_sets]
+    total = sum(len(a) for a in asked)
+    if not total:
+        return kept
+    q = mesh.query(np.concatenate([x[a] for x, a in zip(point_sets, asked, strict=True)]))
+    start = 0
+    for x, a, k in zip(point_sets, asked, kept, strict=True):
+        part = slice(start, start + len(a))
+        k.store(x, a, Closest(*(getattr(q, name.name)[part] for name in fields(Closest))))
+        start += len(a)
+    return kept
