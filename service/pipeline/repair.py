@@ -31,6 +31,7 @@ from service.geometry.intersections import TriangleGrid
 from service.geometry.mesh import vertex_normals
 from service.pipeline.fit import dilate, vertex_neighbours
 from service.pipeline.quality import PENETRATION_BAND
+from service.process.threads import pool
 
 REACH = PENETRATION_BAND + 0.01
 """m: vertices whose field distance to an inner layer is below this are checked against its mesh: a
@@ -187,12 +188,19 @@ def repair_layer(
     # Only triangles with a vertex near an inner layer can cross it, and only the inner triangles
     # around those (the rest of a body never changes between rounds).
     tested = [np.flatnonzero(layer.near[faces].any(axis=1)) for layer in inner]
-    grids = []
-    for layer, t in zip(inner, tested, strict=True):
+
+    def grid(n: int) -> TriangleGrid:
         corners = np.zeros(len(x), dtype=bool)  # the tested triangles' corners: the same bounding box
-        corners[faces[t].ravel()] = True
-        around = _faces_around(layer.mesh, x[corners], settings.band)
-        grids.append(TriangleGrid.build(layer.mesh.vertices, layer.mesh.faces[around]))
+        corners[faces[tested[n]].ravel()] = True
+        around = _faces_around(inner[n].mesh, x[corners], settings.band)
+        return TriangleGrid.build(inner[n].mesh.vertices, inner[n].mesh.faces[around])
+
+    # One grid per inner layer, built side by side (its cell lists are compiled and release the GIL).
+    grids = (
+        list(pool("grids", 2).map(grid, range(len(inner))))
+        if len(inner) > 1
+        else [grid(n) for n in range(len(inner))]
+    )
     queries = [layer.kept or KeptQueries(layer.mesh, len(x)) for layer in inner]
     # Crossing pairs (tested triangle, inner triangle) of each layer, and the vertices they were
     # found at: a triangle none of whose vertices moved keeps its pairs (the inner layers are fixed).

@@ -105,12 +105,14 @@ def test_blocked_threaded_query_is_the_single_block_query_bit_for_bit(monkeypatc
 
     sphere = trimesh.creation.icosphere(subdivisions=3, radius=0.1)
     points = np.random.default_rng(3).normal(scale=0.12, size=(5000, 3))
-    monkeypatch.setattr(closest, "QUERY_BLOCK", 10**9)
+    monkeypatch.setattr(closest, "MIN_SPLIT", 10**9)
     whole = ClosestPoint.build(sphere.vertices, sphere.faces).query(points)
-    monkeypatch.setattr(closest, "QUERY_BLOCK", 700)  # 8 blocks on the threads
-    blocked = ClosestPoint.build(sphere.vertices, sphere.faces).query(points)
-    for name in ("face", "bary", "point", "distance", "signed", "normal"):
-        np.testing.assert_array_equal(getattr(blocked, name), getattr(whole, name))
+    monkeypatch.setattr(closest, "MIN_SPLIT", 512)
+    for block in (700, 4096, 10**9):  # 8 blocks on the threads, 2, and 2 (never fewer than the threads)
+        monkeypatch.setattr(closest, "QUERY_BLOCK", block)
+        blocked = ClosestPoint.build(sphere.vertices, sphere.faces).query(points)
+        for name in ("face", "bary", "point", "distance", "signed", "normal"):
+            np.testing.assert_array_equal(getattr(blocked, name), getattr(whole, name))
 
 
 FIELDS = ("face", "bary", "point", "distance", "signed", "normal")

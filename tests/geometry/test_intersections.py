@@ -253,6 +253,22 @@ def test_grid_crossing_matches_intersecting_pairs(seed: int):
             assert pair_set(got) == pair_set(intersecting_pairs(v1, f1, v2, f2))
 
 
+def test_grid_crossing_on_two_threads_is_the_one_thread_answer_in_order(monkeypatch):
+    import service.geometry.intersections as intersections
+
+    rng = np.random.default_rng(310)
+    va, fa = perturbed_sphere(rng, 1.0, np.zeros(3), noise=0.05)
+    vb, fb = perturbed_sphere(rng, 0.9, np.array([0.3, 0.0, 0.1]), noise=0.05)
+    grid = TriangleGrid.build(vb, fb)
+    monkeypatch.setattr(intersections, "CROSSING_SPLIT", 10**9)
+    whole = grid.crossing(va, fa)
+    assert len(whole) > 50 and len(fa) == 80
+    monkeypatch.setattr(intersections, "CROSSING_SPLIT", 40)
+    for threads in (2, 3):
+        monkeypatch.setattr(intersections, "CROSSING_THREADS", threads)
+        np.testing.assert_array_equal(grid.crossing(va, fa), whole)
+
+
 def test_grid_crossing_finds_a_known_crossing_and_nothing_far_away():
     grid = TriangleGrid.build(FLAT, ONE_FACE)
     spike = np.array([[0.0, 0.0, -1.0], [0.1, 0.0, 1.0], [-0.1, 0.1, 1.0]])
