@@ -42,6 +42,22 @@ def _cells(lo, hi, origin, cell, dims):
 
 
 @njit(cache=True, nogil=True)
+def corner_boxes(vertices, faces, corners, lo, hi):
+    """``corners (F, 3, 3)`` = ``vertices[faces]`` and their bounding boxes ``lo, hi (F, 3)``: numpy's
+    gather and ``min`` / ``max`` over the corners (the same values: a minimum is exact), in one pass
+    instead of strided reductions over an axis of 3 (~6 ms for the body's 26,692 triangles)."""
+    for t in range(len(faces)):
+        for k in range(3):
+            v = faces[t, k]
+            for a in range(3):
+                corners[t, k, a] = vertices[v, a]
+        for a in range(3):
+            c0, c1, c2 = corners[t, 0, a], corners[t, 1, a], corners[t, 2, a]
+            lo[t, a] = min(c0, min(c1, c2))
+            hi[t, a] = max(c0, max(c1, c2))
+
+
+@njit(cache=True, nogil=True)
 def fill(lo, hi, origin, cell, dims):
     """(start (C + 1,), items (E,)): the triangles of boxes ``lo, hi (F, 3)`` in every cell they touch,
     cell c's from ``start[c]`` to ``start[c + 1]`` (cells numbered z fastest)."""

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from service.geometry.grid_kernel import fill, pairs
+from service.geometry.grid_kernel import corner_boxes, fill, pairs
 from service.geometry.mesh import check_mesh
 from service.process.threads import pool
 
@@ -131,8 +131,7 @@ class TriangleGrid:
         check_mesh(vertices, faces)
         if cell is not None and not 0 < cell < np.inf:
             raise ValueError(f"cell must be positive and finite, got {cell}")
-        corners = np.ascontiguousarray(np.asarray(vertices, dtype=np.float64)[np.asarray(faces)])
-        lo, hi = corners.min(axis=1), corners.max(axis=1)
+        corners, lo, hi = _corner_boxes(vertices, faces)
         if cell is None:
             side = (hi - lo).max(axis=1) if len(lo) else np.ones(1)
             cell = float(np.median(side)) if len(side) else 1.0
@@ -160,10 +159,9 @@ class TriangleGrid:
     def crossing(self, vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
         """Pairs ``(K, 2)`` (into ``faces (F, 3)`` over ``vertices (V, 3)``, into the grid's faces)
         that cross: ``intersecting_pairs`` against the grid's mesh, the same set."""
-        corners = np.ascontiguousarray(np.asarray(vertices, dtype=np.float64)[np.asarray(faces)])
+        corners, lo, hi = _corner_boxes(vertices, faces)
         if not len(corners) or not len(self.normal):
             return np.zeros((0, 2), dtype=np.int64)
-        lo, hi = corners.min(axis=1), corners.max(axis=1)
         if len(corners) < CROSSING_SPLIT or CROSSING_THREADS <= 1:
             return self._pairs(corners, lo, hi, exact=True)
         # Halves on two threads (the kernel releases the GIL): its pairs come in query order, so the
@@ -174,6 +172,16 @@ class TriangleGrid:
         for i, part in zip(cut, parts, strict=True):
             part[:, 0] += i[0] if len(i) else 0
         return np.concatenate(parts)
+
+
+def _corner_boxes(vertices, faces) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(corners (F, 3, 3), lo, hi (F, 3)) of ``faces (F, 3)`` over ``vertices (V, 3)``: ``vertices[faces]``
+    and its min and max over the corners (compiled, ``grid_kernel.corner_boxes``)."""
+    vertices = np.ascontiguousarray(vertices, dtype=np.float64)
+    faces = np.ascontiguousarray(faces, dtype=np.int64)
+    corners, lo, hi = np.empty((len(faces), 3, 3)), np.empty((len(faces), 3)), np.empty((len(faces), 3))
+    corner_boxes(vertices, faces, corners, lo, hi)
+    return corners, lo, hi
 
 
 def candidate_pairs(va, fa, vb, fb) -> np.ndarray:
