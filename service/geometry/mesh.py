@@ -1,4 +1,4 @@
-"""Pure mesh helpers shared by training and serving (numpy only).
+"""Pure mesh helpers shared by training and serving (numpy; the face normals compiled with numba).
 
 Meshes are ``vertices (V, 3) float`` and ``faces (F, 3) int`` with counter-clockwise
 triangles seen from the side their normals point to.
@@ -7,6 +7,7 @@ triangles seen from the side their normals point to.
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 
 def check_mesh(vertices: np.ndarray, faces: np.ndarray) -> None:
@@ -24,19 +25,37 @@ def check_mesh(vertices: np.ndarray, faces: np.ndarray) -> None:
 
 
 def face_normals(vertices: np.ndarray, faces: np.ndarray, normalize: bool = True) -> np.ndarray:
-    """Normals ``(F, 3)``; unnormalised ones have length twice the triangle area."""
-    v = np.take(vertices, faces, axis=0)
-    a, b = (v[:, 1] - v[:, 0]).T, (v[:, 2] - v[:, 0]).T
-    # np.cross's products and differences, component by component on contiguous rows (~2x faster);
-    # np.linalg.norm's sum of squares in its order (face_normals_reference holds them together).
-    n = np.empty((len(v), 3))
-    n[:, 0] = a[1] * b[2] - a[2] * b[1]
-    n[:, 1] = a[2] * b[0] - a[0] * b[2]
-    n[:, 2] = a[0] * b[1] - a[1] * b[0]
-    if normalize:
-        length = np.sqrt(n[:, 0] * n[:, 0] + n[:, 1] * n[:, 1] + n[:, 2] * n[:, 2])
-        n /= np.maximum(length, 1e-30)[:, None]
+    """Normals ``(F, 3)``; unnormalised ones have length twice the triangle area.
+
+    ``face_normals_reference`` bit for bit: np.cross's products and differences and np.linalg.norm's
+    sum of squares, in their order, in one compiled pass (``_face_normals``): every mesh a request
+    queries needs them, and the numpy form's (F, 3, 3) gather took 1.5 ms for the body."""
+    vertices = np.ascontiguousarray(vertices, dtype=np.float64)
+    faces = np.ascontiguousarray(faces, dtype=np.int64)
+    n = np.empty((len(faces), 3))
+    _face_normals(vertices, faces, normalize, n)
     return n
+
+
+@njit(cache=True, nogil=True)
+def _face_normals(vertices, faces, normalize, n):
+    for t in range(len(faces)):
+        i, j, k = faces[t, 0], faces[t, 1], faces[t, 2]
+        a0, a1, a2 = (
+            vertices[j, 0] - vertices[i, 0],
+            vertices[j, 1] - vertices[i, 1],
+            vertices[j, 2] - vertices[i, 2],
+        )
+        b0, b1, b2 = (
+            vertices[k, 0] - vertices[i, 0],
+            vertices[k, 1] - vertices[i, 1],
+            vertices[k, 2] - vertices[i, 2],
+        )
+        n0, n1, n2 = a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
+        if normalize:
+            length = max(np.sqrt(n0 * n0 + n1 * n1 + n2 * n2), 1e-30)
+            n0, n1, n2 = n0 / length, n1 / length, n2 / length
+        n[t, 0], n[t, 1], n[t, 2] = n0, n1, n2
 
 
 def face_normals_reference(vertices: np.ndarray, faces: np.ndarray, normalize: bool = True) -> np.ndarray:

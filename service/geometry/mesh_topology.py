@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import hashlib
 import threading
+import weakref
 from dataclasses import dataclass
 
 import numpy as np
@@ -150,7 +151,7 @@ def mesh_topology(faces: np.ndarray, n_v: int) -> MeshTopology:
     """``MeshTopology.build``, kept per distinct face array (by content) and vertex count, as
     ``service.pipeline.fit.vertex_neighbours`` keeps the adjacency (shared: do not modify it)."""
     faces = np.ascontiguousarray(faces, dtype=np.int64)
-    key = (n_v, faces.shape, hashlib.sha1(faces.tobytes()).digest())
+    key = (n_v, faces.shape, faces_key(faces))
     with _TOPOLOGY_LOCK:
         found = _TOPOLOGY.get(key)
     if found is None:
@@ -162,6 +163,33 @@ def mesh_topology(faces: np.ndarray, n_v: int) -> MeshTopology:
     return found
 
 
+def faces_key(faces: np.ndarray) -> bytes:
+    """The sha1 of an int64 face array's bytes: the key of the caches kept per distinct face array.
+
+    A read-only array (the catalog's garments and the body, ``frozen``) cannot change, so its digest
+    is kept for as long as the array lives, by identity: every request asks for the keys of the same
+    arrays several times (fit, squeeze, repair; ~0.4 ms each for a jacket)."""
+    if faces.flags.writeable or faces.base is not None:
+        return hashlib.sha1(np.ascontiguousarray(faces, dtype=np.int64).tobytes()).digest()
+    ident = id(faces)
+    with _TOPOLOGY_LOCK:
+        kept = _DIGESTS.get(ident)
+    if kept is not None and kept[0]() is faces:
+        return kept[1]
+    digest = hashlib.sha1(np.ascontiguousarray(faces, dtype=np.int64).tobytes()).digest()
+    ref = weakref.ref(faces, lambda _, i=ident: _DIGESTS.pop(i, None))
+    with _TOPOLOGY_LOCK:
+        _DIGESTS[ident] = (ref, digest)
+    return digest
+
+
+def frozen(array: np.ndarray) -> np.ndarray:
+    """``array``, made read-only (shared for the process's life: never modified in place)."""
+    array.flags.writeable = False
+    return array
+
+
+_DIGESTS: dict = {}
 TOPOLOGY_CACHE = 32  # face arrays kept: the body, the catalog's garments and a few more
 _TOPOLOGY: dict = {}
 _TOPOLOGY_LOCK = threading.Lock()

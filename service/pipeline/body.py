@@ -48,6 +48,7 @@ from pathlib import Path
 import numpy as np
 
 from service.geometry.mesh import check_mesh, signed_volume
+from service.geometry.mesh_topology import frozen
 from service.pipeline.appearance import DisplayMesh
 from service.process.paths import models_dir
 
@@ -294,7 +295,7 @@ class BodyModel:
         if grid.shape[:3] != tuple(len(a) for a in anchors) or grid.shape[-1] != 3:
             raise ValueError(f"{path}: corner_vertices {grid.shape} does not match the anchors")
         corners = grid.astype(np.float64).reshape(-1, *grid.shape[3:])
-        faces = data["faces"].astype(np.int64)
+        faces = frozen(data["faces"].astype(np.int64))
         check_mesh(corners[0], faces)
         metadata = {
             "fixed_phenotypes": dict(

@@ -19,6 +19,7 @@ from typing import Literal
 
 import numpy as np
 
+from service.geometry.mesh_topology import frozen
 from service.pipeline.appearance import DisplayMesh, Embedding, Material
 from service.process.manifest import verify_manifest
 from service.process.paths import models_dir
@@ -113,7 +114,7 @@ def load_garment(directory: Path, entry: dict, origin: Origin = "bundled") -> Ga
             category=entry["category"],
             layer_rank=int(entry["layer_rank"]),
             vertices=data["vertices"].astype(np.float64),
-            faces=data["faces"].astype(np.int64),
+            faces=frozen(data["faces"].astype(np.int64)),
             openings=openings,
             display=display,
             material=_load_material(directory, entry.get("material")),

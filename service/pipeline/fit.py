@@ -29,7 +29,6 @@ opening, so a hem under a jacket was only half untangled). No network runs for t
 
 from __future__ import annotations
 
-import hashlib
 import threading
 import time
 from collections.abc import Callable
@@ -39,6 +38,7 @@ from typing import Literal, Protocol
 import numpy as np
 
 from service.geometry.mesh import vertex_normals
+from service.geometry.mesh_topology import faces_key
 from service.pipeline.fields import FieldValues
 from service.pipeline.lbfgs import minimize_lbfgs
 from service.pipeline.strain import RestShape, strain_energy
@@ -136,7 +136,7 @@ def vertex_neighbours(faces: np.ndarray, n_vertices: int):
     A garment's faces never change, and one request asks for its adjacency in the fit, the squeeze
     and every repair pass: it is built once per distinct face array (by content) and kept."""
     faces = np.ascontiguousarray(faces, dtype=np.int64)
-    key = (n_vertices, faces.shape, hashlib.sha1(faces.tobytes()).digest())
+    key = (n_vertices, faces.shape, faces_key(faces))
     with _ADJACENCY_LOCK:
         found = _ADJACENCY.get(key)
     if found is None:

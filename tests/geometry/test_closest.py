@@ -6,6 +6,7 @@ replace."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 import trimesh
 
 from service.geometry.closest import ClosestPoint, closest_on_triangles, closest_point_reference
@@ -243,6 +244,37 @@ def test_kept_topology_is_a_fresh_one_and_kept_by_content():
         np.testing.assert_array_equal(getattr(kept, name), getattr(fresh, name))
     other = f[:, [0, 2, 1]]
     assert mesh_topology(other, len(v)) is not kept
+
+
+def test_face_keys_follow_the_content_and_are_kept_only_for_frozen_arrays():
+    import hashlib
+
+    from service.geometry.mesh_topology import faces_key, frozen
+
+    _, f, _ = _bumpy_sphere(3)
+    f = np.ascontiguousarray(f, dtype=np.int64)
+    digest = hashlib.sha1(f.tobytes()).digest()
+    writeable = f.copy()
+    assert faces_key(writeable) == digest
+    writeable[0, 0] += 1  # a writeable array is hashed on every call: its new content, a new key
+    assert faces_key(writeable) != digest
+    kept = frozen(f.copy())
+    assert faces_key(kept) == faces_key(kept) == digest
+    with pytest.raises(ValueError):
+        kept[0, 0] = 1  # and a frozen one cannot change under its kept key
+    view = kept[::2]  # a view of it (not the array its key is kept for): hashed
+    assert faces_key(view) == hashlib.sha1(np.ascontiguousarray(view).tobytes()).digest()
+
+
+def test_the_catalog_and_the_body_share_frozen_face_arrays():
+    from service.pipeline.body import BodyModel
+    from service.pipeline.catalog import load_catalog
+    from service.process.paths import models_dir
+
+    catalog = load_catalog(models_dir() / "garments")
+    body = BodyModel.load(models_dir() / "body" / "anny_shape.npz")
+    for faces in [g.faces for g in catalog.values()] + [body.faces]:
+        assert not faces.flags.writeable
 
 
 def test_face_normals_are_the_reference_bit_for_bit():
