@@ -14,6 +14,7 @@ from dataclasses import dataclass, fields
 from functools import cached_property
 
 import numpy as np
+from numba import njit
 from scipy.spatial import cKDTree
 
 from service.geometry.closest_kernel import bounding_spheres, select
@@ -305,7 +306,9 @@ class KeptQueries:
         """(signed distance (K,), closest point (K, 3), face normal (K, 3), closest point on the mesh's
         rim (K,) bool) at the points ``ask (K,)`` of ``x (n, 3)``, querying only those that moved since
         they were last asked."""
-        stale = ask[np.any(x[ask] != self.points[ask], axis=1)]
+        ask = np.ascontiguousarray(ask, dtype=np.int64)
+        stale = np.empty(len(ask), dtype=np.int64)
+        stale = stale[: _moved(np.ascontiguousarray(x, dtype=np.float64), self.points, ask, stale)]
         if len(stale):
             self.store(x, stale, self.mesh.query(x[stale]))
         return self.signed[ask], self.point[ask], self.normal[ask], self.rim[ask]
@@ -316,6 +319,19 @@ class KeptQueries:
         self.points[idx] = x[idx]
         self.signed[idx], self.point[idx], self.normal[idx] = q.signed, q.point, q.normal
         self.rim[idx] = self.mesh.on_boundary(q)
+
+
+@njit(cache=True, nogil=True)
+def _moved(x, kept, ask, out) -> int:
+    """The points ``ask`` of ``x (n, 3)`` that differ from ``kept (n, 3)`` (NaN: never asked) into
+    ``out``, in order; returns how many: ``ask[np.any(x[ask] != kept[ask], axis=1)]`` in one pass
+    (the repair's and the squeeze's rounds ask about thousands of vertices of which few moved)."""
+    m = 0
+    for i in ask:
+        if x[i, 0] != kept[i, 0] or x[i, 1] != kept[i, 1] or x[i, 2] != kept[i, 2]:
+            out[m] = i
+            m += 1
+    return m
 
 
 def signed_distance(closest: ClosestPoint, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -295,7 +295,7 @@ class BodyModel:
         if grid.shape[:3] != tuple(len(a) for a in anchors) or grid.shape[-1] != 3:
             raise ValueError(f"{path}: corner_vertices {grid.shape} does not match the anchors")
         corners = grid.astype(np.float64).reshape(-1, *grid.shape[3:])
-        faces = frozen(data["faces"].astype(np.int64))
+        faces = frozen(np.ascontiguousarray(data["faces"], dtype=np.int64))
         check_mesh(corners[0], faces)
         metadata = {
             "fixed_phenotypes": dict(

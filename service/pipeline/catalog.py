@@ -114,7 +114,7 @@ def load_garment(directory: Path, entry: dict, origin: Origin = "bundled") -> Ga
             category=entry["category"],
             layer_rank=int(entry["layer_rank"]),
             vertices=data["vertices"].astype(np.float64),
-            faces=frozen(data["faces"].astype(np.int64)),
+            faces=frozen(np.ascontiguousarray(data["faces"], dtype=np.int64)),
             openings=openings,
             display=display,
             material=_load_material(directory, entry.get("material")),

@@ -275,6 +275,9 @@ def test_the_catalog_and_the_body_share_frozen_face_arrays():
     body = BodyModel.load(models_dir() / "body" / "anny_shape.npz")
     for faces in [g.faces for g in catalog.values()] + [body.faces]:
         assert not faces.flags.writeable
+        # C order (the files hold some in Fortran order): every np.ascontiguousarray of it is itself,
+        # not a copy that would be hashed and gathered afresh on every call.
+        assert np.ascontiguousarray(faces, dtype=np.int64) is faces
 
 
 def test_face_normals_are_the_reference_bit_for_bit():

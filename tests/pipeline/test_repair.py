@@ -95,8 +95,12 @@ def test_kept_queries_answer_as_fresh_ones_after_some_vertices_move():
     kept.at(outer_v, ask)
     moved = outer_v.copy()
     moved[::5] += [0.0, 0.0, 0.003]
+    asked = []
+    query = layer.mesh.query
+    layer.mesh.query = lambda points: asked.append(len(points)) or query(points)
     signed, point, normal, _ = kept.at(moved, ask)
-    fresh = layer.mesh.query(moved[near])
+    assert asked == [len(np.intersect1d(ask, np.arange(0, n, 5)))]  # only the points that moved
+    fresh = query(moved[near])
     np.testing.assert_array_equal(signed, fresh.signed)
     np.testing.assert_array_equal(point, fresh.point)
     np.testing.assert_array_equal(normal, fresh.normal)
