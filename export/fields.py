@@ -1,15 +1,16 @@
 """Export the trained neural fields to ONNX: ``python -m export.fields [ids...]`` reads the finished
 checkpoints of ``python -m training.fields`` (``build/fields/<id>.pt``) and writes ``models/fields/``.
 
-The contract (names, points axis, opset, tolerances) lives in ``service.pipeline.fields``. Two graphs per
-field: values (f, h; what the 30k-point speed target counts) and values with x-gradients. The export is a
+The contract (names, points axis, opset, tolerances) lives in ``service.pipeline.fields``. Three graphs per
+field: values (f, h; what the 30k-point speed target counts), values with both x-gradients, and values with
+grad f alone. The export is a
 contract plus a check: both files are run with onnxruntime on check points around the surface and the export
 raises unless they match torch within ``EXPORT_TOLERANCE``.
 
 ``python -m export.fields --gradients-only [ids...]`` re-exports the gradient graphs alone: the weights are
-read back from the committed values graphs (``load_exported``), the new graph is checked against torch
-and against the graph it replaces, and ``fields.json`` records the new check. Then refresh the
-manifest (``python -m export.manifest``).
+read back from the committed values graphs (``load_exported``), the new graphs are checked against torch
+and against the full gradient graph they replace, and ``fields.json`` records the new check. Then refresh
+the manifest (``python -m export.manifest``).
 """
 
 from __future__ import annotations
@@ -33,12 +34,14 @@ from export.untangler import max_excess
 from service.pipeline.fields import (
     CONFIG_FILE,
     EXPORT_TOLERANCE,
+    F_GRADIENT_NAMES,
     GRADIENT_NAMES,
     INPUT_NAMES,
     OPSET,
     POINTS_AXIS,
     VALUE_NAMES,
     NeuralField,
+    f_gradient_file,
     gradient_file,
     values_file,
 )
@@ -59,6 +62,20 @@ class _WithGradient(_Values):
         return self.net.with_gradient(x, beta)
 
 
+class _WithFGradient(_Values):
+    def forward(self, x, beta):
+        return self.net.with_gradient(x, beta, h_gradient=False)
+
+
+def _gradient_graphs():
+    """(graph kind as ``NeuralField`` takes it, file name, module, outputs) of the gradient graphs,
+    looked up when called (a test swaps a module for a wrong one)."""
+    return (
+        (True, gradient_file, _WithGradient, GRADIENT_NAMES),
+        ("f", f_gradient_file, _WithFGradient, F_GRADIENT_NAMES),
+    )
+
+
 def _export_graph(module: torch.nn.Module, path: Path, outputs: tuple[str, ...], x, beta) -> None:
     with warnings.catch_warnings():  # the TorchScript exporter is deliberate (no onnxscript)
         warnings.simplefilter("ignore", DeprecationWarning)
@@ -71,16 +88,19 @@ def _export_graph(module: torch.nn.Module, path: Path, outputs: tuple[str, ...],
 
 
 def _check(
-    field: NeuralField, gradient: bool, x: np.ndarray, beta: np.ndarray, reference: dict,
+    field: NeuralField, gradient, x: np.ndarray, beta: np.ndarray, reference: dict,
     against: str = "torch",
 ) -> dict:  # fmt: skip
-    """Max abs difference per output of ``field`` vs ``reference``; RuntimeError beyond tolerance."""
+    """Max abs difference per output of ``field`` (``gradient`` as ``NeuralField`` takes it) vs
+    ``reference``; RuntimeError beyond tolerance."""
     check = {}
     values = field(x, beta[0], gradient=gradient)._asdict()
-    for output in GRADIENT_NAMES if gradient else VALUE_NAMES:
+    names = {False: VALUE_NAMES, True: GRADIENT_NAMES, "f": F_GRADIENT_NAMES}[gradient]
+    prefix = {False: "values", True: "grad", "f": "gradf"}[gradient]
+    for output in names:
         ours = values[output].astype(np.float32)
         diff = float(np.abs(ours - reference[output]).max())
-        check[f"{'grad' if gradient else 'values'}:{output}"] = diff
+        check[f"{prefix}:{output}"] = diff
         if max_excess(ours, reference[output], EXPORT_TOLERANCE[output]) > 0:
             raise RuntimeError(
                 f"{field.field_id} output {output!r} differs from {against} by {diff:.3g} beyond the "
@@ -96,19 +116,21 @@ def _torch_reference(net: FieldNet, x: np.ndarray, beta: np.ndarray) -> dict:
 
 
 def export_field(net: FieldNet, field_id: str, directory: Path, x: np.ndarray, beta: np.ndarray) -> dict:
-    """Write ``<id>.onnx`` and ``<id>.grad.onnx``; check them at ``x (P, 3)``, ``beta (1, 3)`` float32
-    against torch. Returns the max abs difference per output; raises RuntimeError beyond tolerance."""
+    """Write ``<id>.onnx``, ``<id>.grad.onnx`` and ``<id>.gradf.onnx``; check them at ``x (P, 3)``,
+    ``beta (1, 3)`` float32 against torch. Returns the max abs difference per output; raises
+    RuntimeError beyond tolerance."""
     directory.mkdir(parents=True, exist_ok=True)
     net = net.float().eval()
     xt, bt = torch.from_numpy(x), torch.from_numpy(beta)
     reference = _torch_reference(net, x, beta)
-    for module, name, outputs in (
-        (_Values(net), values_file(field_id), VALUE_NAMES),
-        (_WithGradient(net), gradient_file(field_id), GRADIENT_NAMES),
-    ):
-        _export_graph(module, directory / name, outputs, xt[:5], bt)
+    _export_graph(_Values(net), directory / values_file(field_id), VALUE_NAMES, xt[:5], bt)
+    for _, name, module, outputs in _gradient_graphs():
+        _export_graph(module(net), directory / name(field_id), outputs, xt[:5], bt)
     field = NeuralField(field_id, directory, threads=1)
-    return _check(field, False, x, beta, reference) | _check(field, True, x, beta, reference)
+    check = _check(field, False, x, beta, reference)
+    for kind, *_ in _gradient_graphs():
+        check |= _check(field, kind, x, beta, reference)
+    return check
 
 
 def load_exported(field_id: str, directory: Path) -> FieldNet:
@@ -138,19 +160,26 @@ def load_exported(field_id: str, directory: Path) -> FieldNet:
 
 
 def reexport_gradient(field_id: str, directory: Path, x: np.ndarray, beta: np.ndarray) -> dict:
-    """Rewrite ``<id>.grad.onnx`` from the weights of ``<id>.onnx``; check it at ``x (P, 3)``,
-    ``beta (1, 3)`` float32 against torch and against the graph it replaces (both within
-    ``EXPORT_TOLERANCE``). Returns the check against torch, as ``export_field``'s ``grad:`` entries."""
+    """Rewrite ``<id>.grad.onnx`` and ``<id>.gradf.onnx`` from the weights of ``<id>.onnx``; check
+    them at ``x (P, 3)``, ``beta (1, 3)`` float32 against torch and against the full gradient graph
+    they replace (both within ``EXPORT_TOLERANCE``). Returns the checks against torch, as
+    ``export_field``'s ``grad:`` and ``gradf:`` entries."""
     net = load_exported(field_id, directory)
     previous = NeuralField(field_id, directory, threads=1)(x, beta[0], gradient=True)._asdict()
+    previous = {k: v.astype(np.float32) for k, v in previous.items()}
+    reference = _torch_reference(net, x, beta)
+    check = {}
     with tempfile.TemporaryDirectory() as tmp:
-        _export_graph(_WithGradient(net), Path(tmp) / gradient_file(field_id), GRADIENT_NAMES,
-                      torch.from_numpy(x[:5]), torch.from_numpy(beta))  # fmt: skip
+        for _, name, module, outputs in _gradient_graphs():
+            _export_graph(module(net), Path(tmp) / name(field_id), outputs, torch.from_numpy(x[:5]),
+                          torch.from_numpy(beta))  # fmt: skip
         os.symlink((directory / values_file(field_id)).resolve(), Path(tmp) / values_file(field_id))
         field = NeuralField(field_id, Path(tmp), threads=1)
-        check = _check(field, True, x, beta, _torch_reference(net, x, beta))
-        _check(field, True, x, beta, {k: v.astype(np.float32) for k, v in previous.items()}, "the old graph")
-        os.replace(Path(tmp) / gradient_file(field_id), directory / gradient_file(field_id))
+        for kind, *_ in _gradient_graphs():
+            check |= _check(field, kind, x, beta, reference)
+            _check(field, kind, x, beta, previous, "the old graph")
+        for _, name, *_ in _gradient_graphs():
+            os.replace(Path(tmp) / name(field_id), directory / name(field_id))
     return check
 
 

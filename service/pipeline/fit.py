@@ -55,7 +55,9 @@ class Untangler(Protocol):
     (P, N, 2N), or only its row k (P, 1, 2N) when row=k, or None without jacobian)``.
 
     The fit asks for the row of the garment it fits only: the neural operator computes that row alone
-    at a third of the full Jacobian's cost (``NeuralUntangler``)."""
+    at a third of the full Jacobian's cost (``NeuralUntangler``). An optional attribute ``h_band``
+    (m) says that the derivative by h*_k is exactly 0 wherever |h*_k| >= h_band: the fit then asks for
+    grad h*_k only inside that band (``_linearise``)."""
 
     def __call__(
         self, f_star: np.ndarray, h_star: np.ndarray, jacobian: bool, row: int | None = None
@@ -221,7 +223,8 @@ def fit_garment(
             # Only triangles touching an optimised vertex change: the strain of the rest is constant.
             rest, touched = full_rest.subset(near), near
         with clock("fields"):
-            lin = _linearise(fields, n_layers, x[idx], f_star[idx], layer, settings.reach, own, idx)
+            lin = _linearise(fields, n_layers, x[idx], f_star[idx], layer, settings.reach, own, idx,
+                             getattr(untangler, "h_band", None))  # fmt: skip
         if lin is None:
             ok = False  # a network answered NaN or inf: keep the last valid iterate
             break
@@ -264,7 +267,8 @@ def _values(fields: LayerFields, n_layers: int, x: np.ndarray, known: tuple[int,
 
 
 def _linearise(fields: LayerFields, n_layers: int, x: np.ndarray, f_now: np.ndarray, layer: int, reach,
-               own: OwnField | None = None, idx: np.ndarray | None = None):  # fmt: skip
+               own: OwnField | None = None, idx: np.ndarray | None = None,
+               band: float | None = None):  # fmt: skip
     """Fields of every layer at ``x (P, 3)`` with x-gradients, for the linearisation: (f*, h* (P, N),
     grad f*, grad h* (P, N, 3)), or None if a network answered NaN or inf. With ``own``, layer
     ``layer``'s come from it at the vertices ``idx (P,)``.
@@ -272,6 +276,11 @@ def _linearise(fields: LayerFields, n_layers: int, x: np.ndarray, f_now: np.ndar
     ``f_now (P, N)`` are the current values: a layer farther than ``reach`` from a point is inactive
     there (``far_layers``), a constant of the fit, so its gradients are 0 and are not evaluated (the
     gradient graph costs ~5 values; a jacket's sleeves are far from the pants at every vertex).
+
+    ``band``: the untangler's derivative by h*_k is exactly 0 where |h*_k| >= band (``Untangler.h_band``;
+    the neural operator sees h* only through clamp(h* / h_band), the exact one not at all: 0), so
+    grad h*_k counts only inside it. Every near point gets grad f alone first (the cheaper graph, the
+    same values and grad f); those its h puts inside the band then get grad h too. None: everywhere.
     """
     far = far_layers(f_now, layer, reach)
     fl, hl = f_now.copy(), np.full(f_now.shape, INACTIVE)
@@ -280,10 +289,20 @@ def _linearise(fields: LayerFields, n_layers: int, x: np.ndarray, f_now: np.ndar
         near = np.flatnonzero(~far[:, k])
         if not len(near):
             continue
-        v = own.at(idx, x) if own is not None and k == layer else fields(k, x[near], True)
+        if own is not None and k == layer:
+            v = own.at(idx, x)
+        else:
+            v = fields(k, x[near], True if band is None else "f")
         if not all(np.all(np.isfinite(a)) for a in v):
             return None
         fl[near, k], hl[near, k], grad_f[near, k], grad_h[near, k] = v
+        if band is not None and not (own is not None and k == layer) and k > 0:
+            inside = near[np.abs(hl[near, k]) < band]
+            if len(inside):
+                grad = fields(k, x[inside], True).grad_h
+                if not np.all(np.isfinite(grad)):
+                    return None
+                grad_h[inside, k] = grad
     return fl, hl, grad_f, grad_h
 
 

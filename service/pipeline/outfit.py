@@ -109,6 +109,7 @@ class OutfitModels:
                 out = self.neural_untangler.screened(f_star, h_star, jacobian=jacobian, row=row)
                 return out.f, out.jacobian
 
+            neural.h_band = self.neural_untangler.h_band  # it sees h* only through clamp(h* / h_band)
             return neural
 
         return rows_of(untangle_with_jacobian)

@@ -140,6 +140,8 @@ def test_network_gradient_graph_matches_autograd_and_finite_differences(fourier)
     x = torch.from_numpy(rng.normal(size=(64, 3)) * 0.3 + [0, 0, 1])
     beta = torch.tensor([[0.3, 0.5, 0.7]], dtype=torch.float64)
     f, h, gf, gh = net.with_gradient(x, beta)
+    for a, b in zip(net.with_gradient(x, beta, h_gradient=False), (f, h, gf), strict=True):
+        torch.testing.assert_close(a, b, atol=1e-12, rtol=0)  # one cotangent: the same f, h, grad f
     f0, h0 = net(x, beta)
     torch.testing.assert_close(f, f0, atol=1e-12, rtol=0)
     torch.testing.assert_close(h, h0, atol=1e-12, rtol=0)
@@ -170,10 +172,25 @@ def test_export_matches_torch_and_detects_a_wrong_graph(tmp_path, monkeypatch):
     with torch.no_grad():
         ref = net.with_gradient(torch.from_numpy(x), torch.from_numpy(beta))
     np.testing.assert_allclose(out.grad_f, ref[2].numpy(), atol=1e-5)
-    # A graph that is not the network's must be refused.
-    monkeypatch.setattr(export_fields, "_WithGradient", _Broken)
-    with pytest.raises(RuntimeError, match="differs from torch"):
-        export_fields.export_field(net, "probe", tmp_path, x, beta)
+    # The graph with grad f alone: the full graph's values and grad f, and zeros for grad h.
+    alone = NeuralField("probe", tmp_path, threads=1)(x, beta[0], gradient="f")
+    assert (tmp_path / "probe.gradf.onnx").is_file()
+    for name in ("f", "h", "grad_f"):
+        np.testing.assert_allclose(getattr(alone, name), getattr(out, name), atol=1e-6, rtol=0)
+    assert np.all(alone.grad_h == 0)
+    with pytest.raises(ValueError, match="gradient must be"):
+        NeuralField("probe", tmp_path, threads=1)(x, beta[0], gradient="h")
+    # A directory without it (a garment imported before it existed): the full graph, grad h dropped.
+    (tmp_path / "probe.gradf.onnx").unlink()
+    old = NeuralField("probe", tmp_path, threads=1)(x, beta[0], gradient="f")
+    np.testing.assert_array_equal(old.grad_f, out.grad_f)
+    assert np.all(old.grad_h == 0)
+    # A graph that is not the network's must be refused, either gradient graph.
+    for name in ("_WithGradient", "_WithFGradient"):
+        with monkeypatch.context() as m:
+            m.setattr(export_fields, name, _Broken)
+            with pytest.raises(RuntimeError, match="differs from torch"):
+                export_fields.export_field(net, "probe", tmp_path, x, beta)
 
 
 def test_gradient_batches_agree_with_one_call(tmp_path, monkeypatch):
@@ -208,10 +225,23 @@ def test_gradient_graph_reexports_from_the_values_graph(tmp_path):
         assert name == name_q
         torch.testing.assert_close(p, q, atol=0, rtol=0)
     before = NeuralField("probe", tmp_path, threads=1)(x, beta[0], gradient=True)
+    (tmp_path / "probe.gradf.onnx").unlink()  # a directory exported before the grad-f graph existed
     regrad = export_fields.reexport_gradient("probe", tmp_path, x, beta)
-    assert set(regrad) == {"grad:f", "grad:h", "grad:grad_f", "grad:grad_h"}
+    assert set(regrad) == {
+        "grad:f",
+        "grad:h",
+        "grad:grad_f",
+        "grad:grad_h",
+        "gradf:f",
+        "gradf:h",
+        "gradf:grad_f",
+    }
+    assert (tmp_path / "probe.gradf.onnx").is_file()
     after = NeuralField("probe", tmp_path, threads=1)(x, beta[0], gradient=True)
     for a, b in zip(after, before, strict=True):
+        np.testing.assert_allclose(a, b, atol=1e-6)
+    alone = NeuralField("probe", tmp_path, threads=1)(x, beta[0], gradient="f")
+    for a, b in zip(alone[:3], before[:3], strict=True):
         np.testing.assert_allclose(a, b, atol=1e-6)
 
 

@@ -300,3 +300,42 @@ def test_fit_through_the_neural_row_graph_equals_the_full_jacobian_fit():
         assert ours.ok and ours.linearisations == 1 and layer in calls
         np.testing.assert_array_equal(ours.optimised, theirs.optimised)
         np.testing.assert_allclose(ours.vertices, theirs.vertices, rtol=0, atol=1e-7)
+
+
+def test_grad_h_is_asked_only_inside_the_untanglers_band_and_the_fit_is_the_same():
+    """An untangler whose h-derivative is 0 outside |h*| < h_band (``Untangler.h_band``): the fit asks
+    every near point for grad f alone ("f"), the points inside the band also for grad h, and fits as
+    with grad h asked everywhere, bit for bit."""
+    v, f = _sheet(n=10, z=0.009)
+    band = 0.01
+
+    def fields(k, x, gradient):
+        base = planes([0.0, 0.010, 0.008])(k, x, gradient)
+        h = np.where(k == 1, x[:, 0] - 0.05, -1.0)  # layer 1's opening crosses the sheet at x = 5 cm
+        grad_h = None if not gradient else np.tile([1.0 if k == 1 else 0.0, 0, 0], (len(x), 1))
+        return base._replace(
+            h=h, grad_h=grad_h if gradient is True else (None if not gradient else 0 * grad_h)
+        )
+
+    def banded(f_star, h_star, jacobian, row=None):
+        out, jac = reference(f_star, h_star, jacobian, row)
+        if jac is not None:  # an h-derivative inside the band, like the neural operator's blend
+            n = f_star.shape[1]
+            jac = jac.copy()
+            jac[:, :, n:] = np.where(np.abs(h_star) < band, 0.3, 0.0)[:, None, :]
+        return out, jac
+
+    asked = []
+
+    def recording(k, x, gradient):
+        asked.append((k, gradient, x.copy()))
+        return fields(k, x, gradient)
+
+    plain = fit_garment(v, f, 2, 3, fields, banded)
+    banded.h_band = band
+    ours = fit_garment(v, f, 2, 3, recording, banded)
+    assert ours.ok and ours.optimised.any()
+    np.testing.assert_array_equal(ours.vertices, plain.vertices)
+    full_h = [x for k, g, x in asked if k == 1 and g is True]
+    assert any(g == "f" for k, g, _ in asked if k == 1) and full_h
+    assert all(np.all(np.abs(x[:, 0] - 0.05) < band) for x in full_h)  # only inside the band

@@ -98,8 +98,10 @@ class FieldNet(torch.nn.Module):
         out = self.out(a) * OUTPUT_SCALE
         return out[:, 0], out[:, 1]
 
-    def with_gradient(self, x, beta):
-        """(f (P,), h (P,), grad f (P, 3), grad h (P, 3)), gradients in reverse mode.
+    def with_gradient(self, x, beta, h_gradient: bool = True):
+        """(f (P,), h (P,), grad f (P, 3), grad h (P, 3)), gradients in reverse mode; without
+        ``h_gradient`` only grad f, (f, h, grad f): one cotangent, ~30 % less work (the fit needs
+        grad h only where the untangler's blend band makes it count).
 
         Two cotangents instead of three tangents: 2/3 of forward mode's GEMM work on the hidden
         layers, and no per-layer concatenation (the stacked forward-mode graph this replaced spent
@@ -115,13 +117,16 @@ class FieldNet(torch.nn.Module):
             a, slope = self._silu_and_slope(layer(a))
             slopes.append(slope)
         out = self.out(a) * OUTPUT_SCALE  # (P, 2)
-        # Cotangents d(f, h) / dz of each layer, last to first: (2, P, W).
-        g = (self.out.weight * OUTPUT_SCALE)[:, None, :] * slopes[-1]
+        # Cotangents d(f, h) / dz of each layer, last to first: (2, P, W), or (1, P, W) for f alone.
+        w_out = self.out.weight if h_gradient else self.out.weight[:1]
+        g = (w_out * OUTPUT_SCALE)[:, None, :] * slopes[-1]
         for layer, slope in zip(reversed(self.hidden), reversed(slopes[:-1]), strict=True):
             g = (g @ layer.weight) * slope
         # Through the features: d xn / dx = inv_extent, d sin / dx = cos freqs inv_extent, d cos = -sin ...
         g_xn, g_sin, g_cos = (g @ self.first.weight).split([3, m, m], -1)  # (2, P, 3), (2, P, m) twice
         grad = (g_xn + (g_sin * c - g_cos * s) @ self.freqs) * self.inv_extent  # (2, P, 3)
+        if not h_gradient:
+            return out[:, 0], out[:, 1], grad[0]
         return out[:, 0], out[:, 1], grad[0], grad[1]
 
     @staticmethod
