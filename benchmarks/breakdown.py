@@ -52,6 +52,10 @@ KERNELS = (
     ("service.pipeline.repair", "_clear_of_kernel"),
     ("service.geometry.intersections", "fill"),
     ("service.geometry.intersections", "pairs"),
+    ("service.geometry.intersections", "corner_boxes"),
+    ("service.geometry.sdf_grid", "_trilinear"),
+    ("service.geometry.mesh", "_face_normals"),
+    ("service.geometry.closest", "_moved"),
 )
 
 
