@@ -1,35 +1,43 @@
-"""Random garment orders: which stacks the service can untangle, and what the report says of the rest.
+"""Garment orders: which stacks the service untangles, and what the report says of the rest.
 
-Run (a minute or two)::
+Run (a minute or two each)::
 
-    python -m benchmarks.orders [--outfits 24] [--seed 7]
+    python -m benchmarks.orders [--outfits 24] [--seed 7]      # random stacks of 1-4, one per body
+    python -m benchmarks.orders --pairs [--bodies 1]           # every ordered pair, held-out + corners
+    python -m benchmarks.orders --stacks 100 [--seed 7]        # random stacks of 3-4, held-out + corners
 
-``--outfits`` outfits of 1-4 catalog garments in random order (many of them orders cloth cannot take:
-shorts over a skirt, a T-shirt over a jacket) on held-out body shapes (a Sobol seed no training used),
-one request at a time as the service runs them (no quality measures). Per outfit: the report's
-``collision_free`` and ``crossing_pairs`` after the repair, and the time.
+The default: ``--outfits`` outfits of 1-4 catalog garments in random order (many of them orders cloth
+cannot take: shorts over a skirt, a T-shirt over a jacket) on held-out body shapes (a Sobol seed no
+training used), one request at a time as the service runs them (no quality measures). Per outfit: the
+report's ``collision_free`` and ``crossing_pairs`` after the repair, and the time.
+
+``--pairs`` (issue 21): every ordered pair of distinct catalog garments (inner first) on ``--bodies``
+held-out bodies plus two corners of the supported box (the shortest and lightest woman, the tallest
+and heaviest man). ``--stacks N``: N random stacks of 3-4 distinct garments in random order, each on a
+body drawn from held-out shapes and all four extreme corners. Both with the quality measures: per
+outfit the crossing pairs, the largest share of a garment's vertices inside an inner layer after the
+repair, the largest Green strain of any garment against its rest shape (the catalog's mesh: p99 over its
+triangles, and the maximum) and the time; then a summary: outfits, clean ones (0 crossing pairs and at
+most ``PENETRATION_LIMIT`` % penetrating), the worst of each measure and the p50 time.
 """
 
 from __future__ import annotations
 
 import argparse
+import itertools
 
 import numpy as np
 
+from benchmarks.imported import corners
 from service.pipeline.outfit import OutfitModels, make_outfit
+from service.pipeline.strain import RestShape, green_strain_norms
 from training.drape.dataset import sample_betas
 
 BODY_SEED = 99
+PENETRATION_LIMIT = 0.1  # %: issue 21's bound for a clean outfit
 
 
-def main(argv=None) -> None:
-    parser = argparse.ArgumentParser(
-        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
-    )
-    parser.add_argument("--outfits", type=int, default=24)
-    parser.add_argument("--seed", type=int, default=7)
-    args = parser.parse_args(argv)
-    models = OutfitModels.load()
+def random_orders(models: OutfitModels, args) -> None:
     rng = np.random.default_rng(args.seed)
     catalog = sorted(models.catalog)
     betas = sample_betas(args.outfits, BODY_SEED)
@@ -45,6 +53,91 @@ def main(argv=None) -> None:
         print(f"| {' < '.join(ids)} | {body} | {'yes' if r['collision_free'] else 'no'} "
               f"| {r['crossing_pairs']} | {1e3 * r['seconds']['total']:.0f} |")  # fmt: skip
     print(f"\ncollision free: {clean} of {args.outfits}")
+
+
+def measured(models: OutfitModels, ids: list[str], beta: np.ndarray) -> dict:
+    """One outfit with the quality measures: crossing pairs, worst penetration (%), worst strain
+    (p99 and max over the garments' triangles, against the catalog's rest meshes), ms."""
+    outfit = make_outfit(models, ids, beta, measure=True)
+    r = outfit.report
+    strain_p99, strain_max = 0.0, 0.0
+    for gid, vertices, faces in outfit.garments:
+        norms = green_strain_norms(vertices, RestShape.build(models.catalog[gid].vertices, faces))
+        strain_p99 = max(strain_p99, float(np.percentile(norms, 99)))
+        strain_max = max(strain_max, float(norms.max()))
+    penetration = 100 * max(r["penetration_after"].values(), default=0.0)
+    return {
+        "pairs": int(r["crossing_pairs"]),
+        "penetration": penetration,
+        "strain_p99": strain_p99,
+        "strain_max": strain_max,
+        "ms": 1e3 * r["seconds"]["total"],
+        "clean": r["crossing_pairs"] == 0 and penetration <= PENETRATION_LIMIT,
+    }
+
+
+def _table(title: str, runs: list[tuple[list[str], np.ndarray, dict]]) -> None:
+    print(f"## {title}")
+    print("| outfit (inner < outer) | body (gender, height, weight) | clean | crossing pairs "
+          "| penetration % | strain p99 | strain max | ms |")  # fmt: skip
+    print("|---|---|---|---:|---:|---:|---:|---:|")
+    for ids, beta, m in runs:
+        body = ", ".join(f"{v:.2f}" for v in beta)
+        cells = [" < ".join(ids), body, "yes" if m["clean"] else "no", m["pairs"], f"{m['penetration']:.3f}",
+                 f"{m['strain_p99']:.3f}", f"{m['strain_max']:.3f}", f"{m['ms']:.0f}"]  # fmt: skip
+        print("| " + " | ".join(map(str, cells)) + " |")
+    results = [m for _, _, m in runs]
+    print()
+    print("| outfits | accepted | refused | clean | worst crossing pairs | worst penetration % "
+          "| worst strain p99 | p50 ms |")  # fmt: skip
+    print("|---:|---:|---:|---:|---:|---:|---:|---:|")
+    worst = {key: max(m[key] for m in results) for key in ("pairs", "penetration", "strain_p99")}
+    cells = [len(results), len(results), 0, sum(m["clean"] for m in results), worst["pairs"],
+             f"{worst['penetration']:.3f}", f"{worst['strain_p99']:.3f}",
+             f"{np.median([m['ms'] for m in results]):.0f}"]  # fmt: skip
+    print("| " + " | ".join(map(str, cells)) + " |")
+    print()
+
+
+def pairs(models: OutfitModels, args) -> None:
+    betas = np.concatenate([sample_betas(args.bodies, BODY_SEED), corners()[[0, 3]]])
+    runs = [
+        (list(ids), beta, measured(models, list(ids), beta))
+        for ids in itertools.permutations(sorted(models.catalog), 2)
+        for beta in betas
+    ]
+    _table(f"Every ordered pair of catalog garments on {args.bodies} held-out bodies + 2 corners", runs)
+
+
+def stacks(models: OutfitModels, args) -> None:
+    rng = np.random.default_rng(args.seed)
+    catalog = sorted(models.catalog)
+    held_out, extremes = sample_betas(args.stacks, BODY_SEED), corners()
+    runs = []
+    for n in range(args.stacks):
+        ids = [str(g) for g in rng.choice(catalog, size=rng.integers(3, 5), replace=False)]
+        beta = extremes[n] if n < len(extremes) else held_out[n]  # the four corners first
+        runs.append((ids, beta, measured(models, ids, beta)))
+    _table(f"{args.stacks} random stacks of 3-4 garments (the first 4 on the box's corners)", runs)
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--outfits", type=int, default=24)
+    parser.add_argument("--seed", type=int, default=7)
+    parser.add_argument("--pairs", action="store_true", help="every ordered pair (issue 21)")
+    parser.add_argument("--bodies", type=int, default=1, help="held-out bodies for --pairs (plus 2 corners)")
+    parser.add_argument("--stacks", type=int, default=0, help="random stacks of 3-4 garments (issue 21)")
+    args = parser.parse_args(argv)
+    models = OutfitModels.load()
+    if args.pairs:
+        pairs(models, args)
+    if args.stacks:
+        stacks(models, args)
+    if not (args.pairs or args.stacks):
+        random_orders(models, args)
 
 
 if __name__ == "__main__":
