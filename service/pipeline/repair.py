@@ -201,7 +201,7 @@ def repair_layer(
         if len(inner) > 1
         else [grid(n) for n in range(len(inner))]
     )
-    queries = [layer.kept or KeptQueries(layer.mesh, len(x)) for layer in inner]
+    queries = [KeptQueries(layer.mesh, len(x)) if layer.kept is None else layer.kept for layer in inner]
     # Crossing pairs (tested triangle, inner triangle) of each layer, and the vertices they were
     # found at: a triangle none of whose vertices moved keeps its pairs (the inner layers are fixed).
     hits = [np.zeros((0, 2), dtype=np.int64) for _ in inner]
