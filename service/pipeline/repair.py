@@ -196,11 +196,7 @@ def repair_layer(
         return TriangleGrid.build(inner[n].mesh.vertices, inner[n].mesh.faces[around])
 
     # One grid per inner layer, built side by side (its cell lists are compiled and release the GIL).
-    grids = (
-        list(pool("grids", 2).map(grid, range(len(inner))))
-        if len(inner) > 1
-        else [grid(n) for n in range(len(inner))]
-    )
+    grids = [grid(0)] if len(inner) == 1 else list(pool("grids", 2).map(grid, range(len(inner))))
     queries = [KeptQueries(layer.mesh, len(x)) if layer.kept is None else layer.kept for layer in inner]
     # Crossing pairs (tested triangle, inner triangle) of each layer, and the vertices they were
     # found at: a triangle none of whose vertices moved keeps its pairs (the inner layers are fixed).

@@ -25,6 +25,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from service.pipeline.untangle import settled
 from service.process.paths import models_dir
 
 N_SLOTS = 5
@@ -110,8 +111,6 @@ class NeuralUntangler:
         the layers. The network's answer at those points is only its error: up to 3.7 mm at vertices
         near a garment's openings, where it blends h* (measured on the latency benchmark's outfits);
         and it runs on a third to two thirds fewer points."""
-        from service.pipeline.untangle import settled
-
         f_star, h_star = _checked(f_star, h_star, row)
         B, n = f_star.shape
         busy = np.flatnonzero(~settled(f_star, h_star, self.delta, self.h_band, SETTLED_SLACK))
