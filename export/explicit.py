@@ -3,7 +3,7 @@
 
 The graph is the numpy reference ``service.pipeline.explicit.ExplicitModel`` in torch: normalise beta, the
 tanh MLP, then mean + coefficients x basis, with the PCA basis stored float16 (as in the npz) and cast in the
-graph. Contract (names, batch axis, opset, tolerance) in ``service.pipeline.explicit``; the export runs the
+graph, then (body-offset models) the heights decoded and the coordinates put back in canonical space. Contract (names, batch axis, opset, tolerance) in ``service.pipeline.explicit``; the export runs the
 file with onnxruntime on the held-out-like check shapes and raises unless it matches the numpy reference.
 """
 
@@ -47,6 +47,11 @@ class ExplicitNet(torch.nn.Module):
         self.register_buffer(
             "basis", torch.tensor(model.basis, dtype=torch.float16).reshape(len(model.basis), -1)
         )
+        self.offsets = model.anchor is not None
+        if self.offsets:
+            self.register_buffer("anchor", torch.tensor(model.anchor, dtype=torch.float32))
+            self.register_buffer("frame", torch.tensor(model.frame, dtype=torch.float32))
+            self.soft = float(model.soft)
 
     def forward(self, beta):
         h = (beta - self.shift) / self.scale
@@ -54,8 +59,14 @@ class ExplicitNet(torch.nn.Module):
             h = layer(h)
             if i < len(self.layers) - 1:
                 h = torch.tanh(h)
-        flat = self.mean + h @ self.basis.float()
-        return flat.reshape(beta.shape[0], -1, 3)
+        q = (self.mean + h @ self.basis.float()).reshape(beta.shape[0], -1, 3)
+        if not self.offsets:
+            return q
+        u = q[..., 2:3]
+        # decode_height: exp of a non-positive argument only, so the unused branch never overflows
+        low = self.soft * torch.exp(torch.clamp(u - self.soft, max=0.0) / self.soft)
+        local = torch.cat([q[..., :2], torch.where(u >= self.soft, u, low)], dim=-1)
+        return self.anchor + torch.einsum("bvk,vkx->bvx", local, self.frame)
 
 
 def export_explicit(garment_id: str, directory: Path | None = None) -> float:

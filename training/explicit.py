@@ -5,10 +5,12 @@
 Writes ``<id>.npz`` (the numpy model the service's reference reads); ``python -m export.explicit``
 then writes the ONNX graph beside it.
 
-Per garment: PCA of the canonical training drapes (components up to 99.9 % of the variance),
-then a small tanh MLP beta -> PCA coefficients trained with full-batch L-BFGS on the vertex
-error (the basis is orthonormal, so coefficient error is vertex error). The MLP is kept tiny
-and weight-decayed because there are only a few dozen training shapes.
+Per garment: the canonical training drapes in body-offset coordinates (``body_frames``; see
+``service.pipeline.explicit``), their PCA (components up to 99.9 % of the variance), then a small
+tanh MLP beta -> PCA coefficients trained with full-batch L-BFGS on the coordinate error (the basis
+is orthonormal, so coefficient error is coordinate error, which is vertex error away from the body
+and smaller near it). The MLP is kept tiny and weight-decayed because there are only a few dozen
+training shapes.
 """
 
 from __future__ import annotations
@@ -20,7 +22,9 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from service.pipeline.explicit import ExplicitModel
+from service.geometry.closest import ClosestPoint, signed_distance
+from service.pipeline.body import DEFAULT_BETA, BodyModel
+from service.pipeline.explicit import SOFT, ExplicitModel
 from service.process.paths import models_dir
 from training.drape.dataset import DEFAULT_DIR, load_split
 
@@ -35,6 +39,26 @@ class ExplicitConfig:
     weight_decay: float = 1e-4
     iterations: int = 300
     seed: int = 0
+    offsets: bool = True
+    """Body-offset coordinates (False: plain canonical xyz, the models before issue 21)."""
+
+
+def body_frames(points: np.ndarray, body: ClosestPoint) -> tuple[np.ndarray, np.ndarray]:
+    """(anchor ``(V, 3)``, frame ``(V, 3, 3)`` rows t1, t2, n) for ``points (V, 3)`` off the closed
+    ``body``: the closest body point, the distance gradient there (so a point = anchor + d n with
+    d its distance) and two tangents completing a right-handed frame."""
+    q = body.query(points)
+    _, n = signed_distance(body, points)
+    helper = np.where(np.abs(n[:, 2:3]) < 0.9, [[0.0, 0.0, 1.0]], [[1.0, 0.0, 0.0]])
+    t1 = np.cross(helper, n)
+    t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
+    return q.point, np.stack([t1, np.cross(n, t1), n], axis=1)
+
+
+def mean_body() -> ClosestPoint:
+    """The mean body of canonical space, as a closed mesh."""
+    model = BodyModel.load()
+    return ClosestPoint.build(model.vertices(np.asarray(DEFAULT_BETA)), model.faces)
 
 
 def pca(data: np.ndarray, max_components: int, variance: float) -> tuple[np.ndarray, np.ndarray]:
@@ -47,11 +71,17 @@ def pca(data: np.ndarray, max_components: int, variance: float) -> tuple[np.ndar
 
 
 def fit_explicit(
-    garment_id: str, betas: np.ndarray, canonical: np.ndarray, config=ExplicitConfig()
+    garment_id: str, betas: np.ndarray, canonical: np.ndarray, config=ExplicitConfig(), body=None
 ) -> ExplicitModel:
-    """Fit to ``betas (B, 3)`` and canonical drapes ``(B, V, 3)``."""
+    """Fit to ``betas (B, 3)`` and canonical drapes ``(B, V, 3)`` (``body``: the mean body's
+    ``ClosestPoint``, built when None and needed)."""
     B, V, _ = canonical.shape
-    flat = canonical.reshape(B, -1).astype(np.float64)
+    coder = ExplicitModel(garment_id, None, None, None, None, [], [])
+    if config.offsets:
+        anchor, frame = body_frames(canonical.mean(axis=0).astype(np.float64), body or mean_body())
+        coder.anchor, coder.frame, coder.soft = anchor.astype(np.float32), frame.astype(np.float32), SOFT
+    # Encode with the float32 frame that is shipped.
+    flat = np.stack([coder.encode(c.astype(np.float64)) for c in canonical]).reshape(B, -1)
     mean, basis = pca(flat, config.max_components, config.variance)
     basis = basis.astype(np.float16).astype(np.float64)  # train against the basis that is shipped
     target = (flat - mean) @ basis.T  # (B, K)
@@ -83,6 +113,7 @@ def fit_explicit(
         shift, scale,
         [m.weight.detach().numpy().astype(np.float32) for m in linears],
         [m.bias.detach().numpy().astype(np.float32) for m in linears],
+        coder.anchor, coder.frame, coder.soft,
     )  # fmt: skip
 
 
@@ -98,9 +129,10 @@ def main(argv=None) -> None:
 
     out = args.out or models_dir() / "explicit"
     ids = args.ids or json.loads((args.data / "shapes.json").read_text())["config"]["garments"]
+    body = mean_body()
     for gid in ids:
         train = load_split(args.data, "train", gid)
-        model = fit_explicit(gid, train["beta"], train["canonical"])
+        model = fit_explicit(gid, train["beta"], train["canonical"], body=body)
         pred = np.stack([model.canonical(b) for b in train["beta"]])
         err = np.linalg.norm(pred - train["canonical"], axis=2)
         path = model.save(out / f"{gid}.npz")

@@ -6,9 +6,11 @@ import json
 import numpy as np
 import pytest
 
-from service.pipeline.explicit import ExplicitModel
-from training.drape.dataset import DatasetConfig, build_dataset, load_split, sample_betas
-from training.explicit import ExplicitConfig, fit_explicit, pca
+from service.pipeline.explicit import SOFT, ExplicitModel, decode_height, encode_height
+from training.drape.dataset import DatasetConfig, box_corners, build_dataset, load_split, sample_betas, split_betas
+from training.explicit import ExplicitConfig, fit_explicit, mean_body, pca
+
+PLAIN = ExplicitConfig(offsets=False)
 
 
 def _synthetic(n=16, V=40, seed=0):
@@ -32,7 +34,7 @@ def test_pca_recovers_a_low_rank_basis():
 
 def test_explicit_model_reproduces_its_training_samples(tmp_path):
     betas, canonical = _synthetic()
-    model = fit_explicit("tshirt", betas, canonical, ExplicitConfig(iterations=500))
+    model = fit_explicit("tshirt", betas, canonical, ExplicitConfig(iterations=500, offsets=False))
     for i in (0, 7):
         err = np.linalg.norm(model.canonical(betas[i]) - canonical[i], axis=1)
         assert err.max() < 1e-3, "within 1 mm of a training drape"
@@ -43,7 +45,7 @@ def test_explicit_model_reproduces_its_training_samples(tmp_path):
 def test_explicit_model_matches_torch_forward():
     torch = pytest.importorskip("torch")
     betas, canonical = _synthetic()
-    model = fit_explicit("tshirt", betas, canonical, ExplicitConfig(iterations=50))
+    model = fit_explicit("tshirt", betas, canonical, ExplicitConfig(iterations=50, offsets=False))
     layers = []
     for i, (w, b) in enumerate(zip(model.weights, model.biases, strict=True)):
         lin = torch.nn.Linear(w.shape[1], w.shape[0]).double()
@@ -58,7 +60,7 @@ def test_explicit_model_matches_torch_forward():
 
 
 def test_tiny_drape_dataset_builds_resumes_and_trains(tmp_path):
-    config = DatasetConfig(n_train=2, n_test=1, garments=("shorts",))
+    config = DatasetConfig(n_train=2, n_test=1, garments=("shorts",), corners=False)
     record = build_dataset(tmp_path, config, workers=2)
     assert record["bodies"] == 3
     shapes = json.loads((tmp_path / "shapes.json").read_text())
@@ -86,3 +88,77 @@ def test_committed_onnx_explicit_models_match_the_numpy_reference():
             np.testing.assert_allclose(
                 onnx_model.canonical(beta), reference.canonical(beta), atol=ONNX_TOLERANCE
             )
+
+
+def test_height_code_is_a_c1_bijection_onto_positive_heights():
+    d = np.geomspace(1e-5, 0.5, 2001)
+    np.testing.assert_allclose(decode_height(encode_height(d)), d, rtol=1e-12)
+    u = np.linspace(-1.0, 1.0, 20001)
+    assert np.all(decode_height(u) > 0) and np.all(np.diff(decode_height(u)) > 0)
+    # C1 at the join: both one-sided slopes are 1.
+    eps = 1e-9
+    left = (decode_height(SOFT) - decode_height(SOFT - eps)) / eps
+    right = (decode_height(SOFT + eps) - decode_height(SOFT)) / eps
+    np.testing.assert_allclose([left, right], [1.0, 1.0], rtol=1e-5)
+
+
+def _hugging(n=12, seed=0):
+    """Synthetic canonical 'drapes' 0.5-6 mm off the front of the mean body's torso (convex there),
+    closer for heavier betas, as taut cloth on a big body; ``(betas, drapes, body)``."""
+    body = mean_body()
+    rng = np.random.default_rng(seed)
+    betas = sample_betas(n, seed=5)
+    q = body.query(body.vertices)
+    z = body.vertices[:, 2]
+    front = (q.normal[:, 1] < -0.7) & (np.abs(body.vertices[:, 0]) < 0.12) & (z > 0.15) & (z < 0.55)
+    pick = rng.choice(np.flatnonzero(front), 200, replace=False)
+    q = body.query(body.vertices[pick])
+    gap = 0.0005 + 0.0055 * (1 - betas[:, 2:3]) ** 2  # (B, 1): 6 mm at weight 0, 0.5 mm at weight 1
+    drapes = q.point[None] + gap[:, :, None] * q.normal[None]
+    return betas, drapes, body
+
+
+def test_body_offset_model_reproduces_drapes_and_never_sinks_when_extrapolating():
+    betas, drapes, body = _hugging()
+    offsets = fit_explicit("tshirt", betas, drapes, ExplicitConfig(iterations=300), body=body)
+    assert offsets.anchor is not None
+    err = np.linalg.norm(offsets.canonical(betas[3]) - drapes[3], axis=1)
+    assert err.max() < 5e-4
+    plain = fit_explicit("tshirt", betas, drapes, PLAIN, body=body)
+    # Beyond the heaviest training shape the plain model's trend runs into the body: all of it.
+    # The body-offset one stays above every anchor's tangent plane (exactly, by construction), so
+    # only vertices that slid over a concave patch of the torso (under the chest) dip in.
+    beyond = np.array([0.5, 0.5, 1.6])
+    assert np.mean(body.query(plain.canonical(beyond)).signed < 0) > 0.9
+    x = offsets.canonical(beyond)
+    height = np.einsum("vkx,vx->vk", offsets.frame.astype(np.float64), x - offsets.anchor)[:, 2]
+    assert np.all(height > 0)
+    assert np.mean(body.query(x).signed < 0) < 0.1
+
+
+def test_body_offset_model_survives_save_load_and_onnx_export(tmp_path):
+    pytest.importorskip("onnxruntime")
+    from export.explicit import export_explicit
+    from service.pipeline.explicit import ONNX_TOLERANCE, ExplicitOnnx
+
+    betas, drapes, body = _hugging()
+    model = fit_explicit("tshirt", betas, drapes, ExplicitConfig(iterations=50), body=body)
+    loaded = ExplicitModel.load("tshirt", model.save(tmp_path / "tshirt.npz").parent)
+    np.testing.assert_array_equal(loaded.canonical(betas[2]), model.canonical(betas[2]))
+    assert export_explicit("tshirt", tmp_path) <= ONNX_TOLERANCE
+    onnx_model = ExplicitOnnx("tshirt", tmp_path)
+    for beta in (betas[0], np.array([1.0, 0.72, 1.0])):
+        np.testing.assert_allclose(onnx_model.canonical(beta), model.canonical(beta), atol=ONNX_TOLERANCE)
+
+
+def test_corners_are_training_shapes_inside_the_box_and_held_out_at_its_extremes():
+    splits = split_betas(DatasetConfig())
+    train, test = splits["train"], splits["test"]
+    assert len(train) == DatasetConfig.n_train + 8 and len(test) == DatasetConfig.n_test + 4
+    np.testing.assert_array_equal(train[: DatasetConfig.n_train], sample_betas(DatasetConfig.n_train, 1))
+    np.testing.assert_array_equal(test[-4:], box_corners(extremes_only=True))
+    # No training shape is a test shape, and the extremes lie outside every training shape's box.
+    assert min(np.abs(t - u).max() for t in train for u in test) > 0.05
+    assert np.all(test[-4:, 2] <= train[:, 2].min()) or np.all(test[-4:, 2] >= 0)
+    assert train[:, 1].max() < box_corners(extremes_only=True)[:, 1].max()
+    assert train[:, 1].min() > box_corners(extremes_only=True)[:, 1].min()

@@ -8,7 +8,12 @@ Layout under ``data/drapes/`` (resumable: finished bodies are skipped, files app
     build.json             measured build time
 
 Shapes: a scrambled Sobol sequence over the documented adult range of Anny's (gender, height,
-weight) parameters; the test split uses another seed, so no test shape is a training shape.
+weight) parameters; the test split uses another seed, so no test shape is a training shape. A Sobol
+sample of a few dozen points leaves the corners of the box thin (the tallest and heaviest, the
+shortest and lightest), where the explicit models then extrapolate and sink into the body, so the
+training split also holds the box's 8 corners drawn ``corner_inset`` of each range inwards, and the
+test split the 4 extreme corners themselves (``box_corners``): the corners a benchmark measures are
+never training shapes.
 """
 
 from __future__ import annotations
@@ -45,6 +50,10 @@ class DatasetConfig:
     test_seed: int = 2
     garments: tuple[str, ...] = ()
     """Garment ids; empty means the whole catalog."""
+    corners: bool = True
+    """Add the inset box corners to the training split and the extreme ones to the test split."""
+    corner_inset: float = 0.1
+    """Share of the height and weight ranges by which the training corners sit inside the box."""
 
 
 def sample_betas(n: int, seed: int) -> np.ndarray:
@@ -54,6 +63,27 @@ def sample_betas(n: int, seed: int) -> np.ndarray:
     lo = np.array([0.0, HEIGHT_PARAM_RANGE[0], WEIGHT_PARAM_RANGE[0]])
     hi = np.array([1.0, HEIGHT_PARAM_RANGE[1], WEIGHT_PARAM_RANGE[1]])
     return lo + u * (hi - lo)
+
+
+def box_corners(inset: float = 0.0, extremes_only: bool = False) -> np.ndarray:
+    """``(8, 3)`` betas at the corners of the supported box (gender 0 and 1, each height and weight
+    bound moved ``inset`` of its range inwards), or with ``extremes_only`` ``(4, 3)``: each gender at
+    the shortest-lightest and the tallest-heaviest corner."""
+    (h0, h1), (w0, w1) = HEIGHT_PARAM_RANGE, WEIGHT_PARAM_RANGE
+    hs = (h0 + inset * (h1 - h0), h1 - inset * (h1 - h0))
+    ws = (w0 + inset * (w1 - w0), w1 - inset * (w1 - w0))
+    pairs = [(hs[0], ws[0]), (hs[1], ws[1])] if extremes_only else [(h, w) for h in hs for w in ws]
+    return np.array([[g, h, w] for g in (0.0, 1.0) for h, w in pairs])
+
+
+def split_betas(config: DatasetConfig) -> dict[str, np.ndarray]:
+    """The betas of each split: Sobol points first, then the corners (so growing ``n_train`` or
+    ``n_test`` is a rebuild, and the corners never shift the Sobol prefix)."""
+    train, test = sample_betas(config.n_train, config.train_seed), sample_betas(config.n_test, config.test_seed)
+    if config.corners:
+        train = np.concatenate([train, box_corners(config.corner_inset)])
+        test = np.concatenate([test, box_corners(extremes_only=True)])
+    return {"train": train, "test": test}
 
 
 @dataclass
@@ -212,10 +242,7 @@ def build_dataset(out: Path = DEFAULT_DIR, config: DatasetConfig = DatasetConfig
     out = Path(out)
     garment_ids = config.garments or tuple(load_catalog())
     settings = DrapeSettings()
-    splits = {
-        "train": sample_betas(config.n_train, config.train_seed),
-        "test": sample_betas(config.n_test, config.test_seed),
-    }
+    splits = split_betas(config)
     manifest = {
         "config": asdict(config) | {"garments": list(garment_ids)},
         "settings": asdict(settings),
