@@ -3,7 +3,8 @@
 
 The graph is the numpy reference ``service.pipeline.explicit.ExplicitModel`` in torch: normalise beta, the
 tanh MLP, then mean + coefficients x basis, with the PCA basis stored float16 (as in the npz) and cast in the
-graph, then (body-offset models) the heights decoded and the coordinates put back in canonical space. Contract (names, batch axis, opset, tolerance) in ``service.pipeline.explicit``; the export runs the
+graph, then (body-offset models) the heights decoded and the coordinates put back in canonical space.
+Contract (names, batch axis, opset, tolerance) in ``service.pipeline.explicit``; the export runs the
 file with onnxruntime on the held-out-like check shapes and raises unless it matches the numpy reference.
 """
 

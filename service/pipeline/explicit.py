@@ -87,7 +87,8 @@ class ExplicitModel:
         if self.anchor is None:
             return np.asarray(x, dtype=np.float64)
         local = np.einsum("vkx,vx->vk", self.frame.astype(np.float64), x - self.anchor.astype(np.float64))
-        return np.column_stack([local[:, 0], local[:, 1], encode_height(np.maximum(local[:, 2], 1e-4), self.soft)])
+        height = encode_height(np.maximum(local[:, 2], 1e-4), self.soft)
+        return np.column_stack([local[:, 0], local[:, 1], height])
 
     def save(self, path: Path) -> Path:
         arrays = {
@@ -109,7 +110,9 @@ class ExplicitModel:
         path = Path(directory or models_dir() / "explicit") / f"{garment_id}.npz"
         with np.load(path) as z:
             n = sum(1 for k in z.files if k.startswith("w"))
-            offsets = {"anchor": z["anchor"], "frame": z["frame"], "soft": float(z["soft"])} if "anchor" in z else {}
+            offsets = {}
+            if "anchor" in z:
+                offsets = {"anchor": z["anchor"], "frame": z["frame"], "soft": float(z["soft"])}
             return cls(
                 str(z["garment_id"]), z["mean"], z["basis"], z["beta_shift"], z["beta_scale"],
                 [z[f"w{i}"] for i in range(n)], [z[f"b{i}"] for i in range(n)], **offsets,

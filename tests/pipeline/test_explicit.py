@@ -7,7 +7,14 @@ import numpy as np
 import pytest
 
 from service.pipeline.explicit import SOFT, ExplicitModel, decode_height, encode_height
-from training.drape.dataset import DatasetConfig, box_corners, build_dataset, load_split, sample_betas, split_betas
+from training.drape.dataset import (
+    DatasetConfig,
+    box_corners,
+    build_dataset,
+    load_split,
+    sample_betas,
+    split_betas,
+)
 from training.explicit import ExplicitConfig, fit_explicit, mean_body, pca
 
 PLAIN = ExplicitConfig(offsets=False)

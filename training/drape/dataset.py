@@ -79,7 +79,8 @@ def box_corners(inset: float = 0.0, extremes_only: bool = False) -> np.ndarray:
 def split_betas(config: DatasetConfig) -> dict[str, np.ndarray]:
     """The betas of each split: Sobol points first, then the corners (so growing ``n_train`` or
     ``n_test`` is a rebuild, and the corners never shift the Sobol prefix)."""
-    train, test = sample_betas(config.n_train, config.train_seed), sample_betas(config.n_test, config.test_seed)
+    train = sample_betas(config.n_train, config.train_seed)
+    test = sample_betas(config.n_test, config.test_seed)
     if config.corners:
         train = np.concatenate([train, box_corners(config.corner_inset)])
         test = np.concatenate([test, box_corners(extremes_only=True)])
