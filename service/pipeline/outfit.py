@@ -27,6 +27,7 @@ from service.pipeline.catalog import Garment, load_catalog
 from service.pipeline.explicit import ExplicitModel, ExplicitOnnx
 from service.pipeline.fields import BODY, FieldSet, FieldValues
 from service.pipeline.fit import FitResult, FitSettings, fit_garment
+from service.pipeline.layering import LayeringRule, Refusal
 from service.pipeline.quality import Layer, intersections, penetration
 from service.pipeline.repair import RepairSettings
 from service.pipeline.strain import RestShape, green_strain_norms
@@ -53,6 +54,17 @@ class OutfitModels:
     neural_untangler: NeuralUntangler
     space: CanonicalSpace
     body_sdf: SdfGrid | None = None
+    layering: LayeringRule | None = None
+    """Which orders cloth can take (``service.pipeline.layering``); made on first use when None."""
+
+    def layering_rule(self) -> LayeringRule:
+        if self.layering is None:
+            self.layering = LayeringRule(self.space.mean_vertices, self.space.faces)
+        return self.layering
+
+    def refusals(self, garment_ids: list[str]) -> list[Refusal]:
+        """Why cloth cannot take the order ``garment_ids`` (inner to outer): empty when it can."""
+        return self.layering_rule().refusals([self.catalog[g] for g in garment_ids])
 
     def body_field(self, x: np.ndarray, gradient: bool) -> FieldValues:
         """The body's signed distance in canonical space, where every body is the mean body: the

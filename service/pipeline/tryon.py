@@ -96,6 +96,17 @@ def check_garment_ids(garments: tuple[str, ...], allowed: list[str], max_garment
         raise InvalidField("garments", f"repeated id(s) {repeated}", listing)
 
 
+ORDER_RULE = "an order cloth can take (README, 'Layer orders'): swap the garments named, or drop one"
+
+
+def check_order(refusals: list) -> None:
+    """Raise ``InvalidField("garments", ...)`` naming each refused pair and why
+    (``service.pipeline.layering``)."""
+    if refusals:
+        reasons = "; ".join(r.reason for r in refusals)
+        raise InvalidField("garments", f"order refused: {reasons}", ORDER_RULE)
+
+
 def model_version(models_dir: Path) -> str:
     """First 12 hex chars of the manifest's sha256 (it lists every model file's sha256)."""
     path = Path(models_dir) / MANIFEST_NAME
@@ -151,7 +162,9 @@ class ModelEngine:
         if imported:
             manifests = "".join(model_version(d) for d in imported)
             version = hashlib.sha256((version + manifests).encode()).hexdigest()[:12]
-        return cls(OutfitModels.load(models_dir, threads=threads, imported=imported), version)
+        models = OutfitModels.load(models_dir, threads=threads, imported=imported)
+        models.layering_rule().warm(models.catalog.values())  # ~2 s here rather than on first requests
+        return cls(models, version)
 
     def garment_ids(self) -> list[str]:
         return list(self.models.catalog)
@@ -160,6 +173,7 @@ class ModelEngine:
         from service.pipeline.outfit import MAX_GARMENTS
 
         check_garment_ids(spec.garments, self.garment_ids(), MAX_GARMENTS)
+        check_order(self.models.refusals(list(spec.garments)))
         self.beta(spec)
 
     def beta(self, spec: OutfitSpec) -> np.ndarray:
