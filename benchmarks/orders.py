@@ -61,7 +61,11 @@ def random_orders(models: OutfitModels, args) -> None:
 
 def measured(models: OutfitModels, ids: list[str], beta: np.ndarray) -> dict:
     """One outfit with the quality measures: crossing pairs, worst penetration (%), worst strain
-    (p99 and max over the garments' triangles, against their explicit meshes on the same body), ms."""
+    (p99 and max over the garments' triangles, against their explicit meshes on the same body), ms;
+    or ``{"refused": reason}`` for an order the layering rule refuses."""
+    refusals = models.refusals(ids)
+    if refusals:
+        return {"refused": "; ".join(r.reason for r in refusals)}
     outfit = make_outfit(models, ids, beta, measure=True)
     r = outfit.report
     # Against each garment's explicit mesh carried onto the same body: the stretch the layering added
@@ -91,18 +95,22 @@ def _table(title: str, runs: list[tuple[list[str], np.ndarray, dict]]) -> None:
     print("|---|---|---|---:|---:|---:|---:|---:|")
     for ids, beta, m in runs:
         body = ", ".join(f"{v:.2f}" for v in beta)
+        if "refused" in m:
+            print(f"| {' < '.join(ids)} | {body} | refused: {m['refused']} | | | | | |")
+            continue
         cells = [" < ".join(ids), body, "yes" if m["clean"] else "no", m["pairs"], f"{m['penetration']:.3f}",
                  f"{m['strain_p99']:.3f}", f"{m['strain_max']:.3f}", f"{m['ms']:.0f}"]  # fmt: skip
         print("| " + " | ".join(map(str, cells)) + " |")
-    results = [m for _, _, m in runs]
+    results = [m for _, _, m in runs if "refused" not in m]
+    refused = len(runs) - len(results)
     print()
     print("| outfits | accepted | refused | clean | worst crossing pairs | worst penetration % "
           "| worst strain p99 | p50 ms |")  # fmt: skip
     print("|---:|---:|---:|---:|---:|---:|---:|---:|")
-    worst = {key: max(m[key] for m in results) for key in ("pairs", "penetration", "strain_p99")}
-    cells = [len(results), len(results), 0, sum(m["clean"] for m in results), worst["pairs"],
+    worst = {key: max((m[key] for m in results), default=0) for key in ("pairs", "penetration", "strain_p99")}
+    cells = [len(runs), len(results), refused, sum(m["clean"] for m in results), worst["pairs"],
              f"{worst['penetration']:.3f}", f"{worst['strain_p99']:.3f}",
-             f"{np.median([m['ms'] for m in results]):.0f}"]  # fmt: skip
+             f"{np.median([m['ms'] for m in results]) if results else 0:.0f}"]  # fmt: skip
     print("| " + " | ".join(map(str, cells)) + " |")
     print()
 

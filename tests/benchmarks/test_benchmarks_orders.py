@@ -29,7 +29,11 @@ def test_a_measured_outfit_reports_what_the_summary_needs(models, capsys):
     x = models.space.to_bodies([models.explicit["tshirt"].canonical(beta)], models.body.vertices(beta))[0]
     faces = models.catalog["tshirt"].faces
     assert green_strain_norms(x, RestShape.build(x, faces)).max() < 1e-12
-    _table("probe", [(["tshirt"], beta, m), (["tshirt"], beta, m | {"pairs": 3, "clean": False})])
+    refused = measured(models, ["skirt", "shorts"], beta)
+    assert set(refused) == {"refused"} and "shorts cannot be worn over skirt" in refused["refused"]
+    runs = [(["tshirt"], beta, m), (["tshirt"], beta, m | {"pairs": 3, "clean": False})]
+    _table("probe", runs + [(["skirt", "shorts"], beta, refused)])
     lines = capsys.readouterr().out.strip().splitlines()
+    assert any("refused: skirt wraps both legs" in line for line in lines)
     summary = [c.strip() for c in lines[-1].strip("|").split("|")]
-    assert summary[:5] == ["2", "2", "0", str(int(m["clean"])), "3"]
+    assert summary[:5] == ["3", "2", "1", str(int(m["clean"])), "3"]
