@@ -230,3 +230,23 @@ def intersecting_pairs_reference(va, fa, vb, fb) -> np.ndarray:
     i, j = i.ravel(), j.ravel()
     hit = triangles_intersect(va[fa[i]], vb[fb[j]])
     return np.stack([i[hit], j[hit]], axis=1)
+
+
+def segment_crossings(grid: TriangleGrid, p: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """``(N,)`` int: how many of the grid mesh's triangles each segment ``p[n] q[n]`` (``(N, 3)``)
+    properly crosses (``segments_cross_triangles``; touching does not count). Odd: p and q lie on
+    two sides of a closed sheet of the mesh."""
+    lo, hi = np.minimum(p, q), np.maximum(p, q)
+    i, j = grid.candidates(lo, hi)
+    corners = grid.corners[j]
+    hit = segments_cross_triangles(p[i], q[i], corners[:, 0], corners[:, 1], corners[:, 2])
+    return np.bincount(i[hit], minlength=len(p))
+
+
+def segment_crossings_reference(vertices, faces, p, q) -> np.ndarray:
+    """All-pairs version of ``segment_crossings`` (small meshes only)."""
+    tri = vertices[faces]
+    n, f = len(p), len(faces)
+    i, j = np.repeat(np.arange(n), f), np.tile(np.arange(f), n)
+    hit = segments_cross_triangles(p[i], q[i], tri[j, 0], tri[j, 1], tri[j, 2])
+    return np.bincount(i[hit], minlength=n)

@@ -30,6 +30,7 @@ from service.pipeline.fit import FitResult, FitSettings, fit_garment
 from service.pipeline.layering import LayeringRule, Refusal
 from service.pipeline.quality import Layer, intersections, penetration
 from service.pipeline.repair import RepairSettings
+from service.pipeline.squeeze import BodyAnchors
 from service.pipeline.strain import RestShape, green_strain_norms
 from service.pipeline.untangle import untangle_with_jacobian
 from service.pipeline.untangle_onnx import N_SLOTS, NeuralUntangler
@@ -55,12 +56,19 @@ class OutfitModels:
     space: CanonicalSpace
     body_sdf: SdfGrid | None = None
     layering: LayeringRule | None = None
+    _anchors: dict = field(default_factory=dict, repr=False)
     """Which orders cloth can take (``service.pipeline.layering``); made on first use when None."""
 
     def layering_rule(self) -> LayeringRule:
         if self.layering is None:
             self.layering = LayeringRule(self.space.mean_vertices, self.space.faces)
         return self.layering
+
+    def anchors(self, layer_id: str) -> BodyAnchors:
+        """Where the garment's vertices sit on the body (``service.pipeline.squeeze``), made once."""
+        if layer_id not in self._anchors:
+            self._anchors[layer_id] = BodyAnchors.build(self.catalog[layer_id].vertices, self.space.closest)
+        return self._anchors[layer_id]
 
     def refusals(self, garment_ids: list[str]) -> list[Refusal]:
         """Why cloth cannot take the order ``garment_ids`` (inner to outer): empty when it can."""

@@ -22,6 +22,13 @@ T-shirt kept 17 crossings. The displacement spreads over ``ring`` rings (the dif
 repair), so the garment folds in along the outer layer's edge instead of tearing there. The repair
 then pushes whatever the squeeze put inside the body or an inner garment back out, and the outer
 layers over it.
+
+The covariant field only says "covered" near the outer garment's surface and inside its openings.
+Cloth of the inner garment that hangs outside the outer one (a jacket's loose sleeve under a
+long-sleeve shirt's narrower one, a jacket's low armhole under a T-shirt's armpit) is also under it:
+the segment from the vertex's own body point (its ``BodyAnchors``, where the garment sits on the body,
+not the closest point, which for a hanging sleeve can be the torso) to the vertex crosses the outer
+mesh an odd number of times. Such vertices walk towards that body point, whatever their distance.
 """
 
 from __future__ import annotations
@@ -31,6 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from service.geometry.closest import ClosestPoint, KeptQueries
+from service.geometry.intersections import TriangleGrid, segment_crossings
 from service.pipeline.fit import dilate, vertex_neighbours
 from service.pipeline.quality import PENETRATION_BAND
 from service.pipeline.repair import diffuse
@@ -43,6 +51,51 @@ class Outer:
     mesh: ClosestPoint  # its world-space mesh
     near: np.ndarray  # (V,) bool: inner vertices that may be within band of it (others never move)
     covered: np.ndarray  # (V,) bool: inner vertices it covers (its h < 0 there)
+    beyond: np.ndarray | None = None
+    """(V,) bool: vertices found outside it by the segment test: covered, at any distance, and they
+    walk to their anchors."""
+
+
+@dataclass(frozen=True)
+class BodyAnchors:
+    """Where each garment vertex sits on the body: a face of the body mesh and barycentric weights,
+    from the garment's rest mesh on the mean body (every body shares its faces)."""
+
+    face: np.ndarray  # (V,) int64
+    bary: np.ndarray  # (V, 3)
+
+    @classmethod
+    def build(cls, rest: np.ndarray, mean_body: ClosestPoint) -> BodyAnchors:
+        """Anchors of rest vertices ``(V, 3)`` at their closest points on the mean body."""
+        q = mean_body.query(rest)
+        a, b, c = (mean_body.vertices[mean_body.faces[q.face, k]] for k in range(3))
+        return cls(q.face, barycentric(q.point, a, b, c))
+
+    def on(self, body_vertices: np.ndarray, body_faces: np.ndarray) -> np.ndarray:
+        """The anchors on a body of the same topology: ``(V, 3)`` points."""
+        corners = body_vertices[body_faces[self.face]]  # (V, 3, 3)
+        return np.einsum("vk,vkx->vx", self.bary, corners)
+
+
+def barycentric(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """Weights ``(N, 3)`` of points ``p (N, 3)`` in triangles ``a, b, c (N, 3)`` (p in their plane)."""
+    e0, e1, d = b - a, c - a, p - a
+    d00, d01, d11 = (e0 * e0).sum(1), (e0 * e1).sum(1), (e1 * e1).sum(1)
+    d20, d21 = (d * e0).sum(1), (d * e1).sum(1)
+    den = np.maximum(d00 * d11 - d01 * d01, 1e-30)
+    v, w = (d11 * d20 - d01 * d21) / den, (d00 * d21 - d01 * d20) / den
+    return np.column_stack([1 - v - w, v, w])
+
+
+def beyond(x: np.ndarray, anchors: np.ndarray, outer: Outer) -> np.ndarray:
+    """``(V,)`` bool: near vertices of ``x (V, 3)`` whose segment from their anchor ``(V, 3)`` crosses
+    the outer mesh an odd number of times."""
+    ask = np.flatnonzero(outer.near)
+    out = np.zeros(len(x), dtype=bool)
+    if len(ask):
+        grid = TriangleGrid.build(outer.mesh.vertices, outer.mesh.faces)
+        out[ask] = segment_crossings(grid, anchors[ask], x[ask]) % 2 == 1
+    return out
 
 
 @dataclass(frozen=True)
@@ -54,7 +107,7 @@ class SqueezeSettings:
     band: the outer garment's h is only meaningful near it)."""
     ring: int = 3
     smoothing: int = 12
-    rounds: int = 3
+    rounds: int = 8
     relax: int = 4
     """Jacobi iterations over the whole moved patch, pulled vertices included, after the diffusion:
     neighbours pulled towards different sides of an armpit (torso and arm) otherwise part ways and
@@ -71,22 +124,28 @@ class SqueezeResult:
 STEPS = 4  # of the walk towards the body; a vertex still outside after them waits for the next round
 
 
-def _pulls(x: np.ndarray, outer: Outer, kept: KeptQueries, body: KeptQueries, floor: float, settings):
+def _pulls(x: np.ndarray, outer: Outer, kept: KeptQueries, body: KeptQueries, floor: float, settings,
+           anchors: np.ndarray | None = None):  # fmt: skip
     """Vertices of ``x (V, 3)`` outside ``outer`` where it covers them, and their targets: (indices
     (K,), targets (K, 3)). ``kept`` and ``body`` keep the closest points on the outer layer and on the
-    body of the vertices that did not move since the last round."""
+    body of the vertices that did not move since the last round; ``anchors (V, 3)``: the body points
+    the ``outer.beyond`` vertices walk to."""
     cand = np.flatnonzero(outer.near & outer.covered)
     if not len(cand):
         return cand, np.zeros((0, 3))
     signed_out = kept.at(x, cand)[0]
+    far = outer.beyond[cand] if outer.beyond is not None else np.zeros(len(cand), dtype=bool)
     # 10 % slack, as in the repair: a vertex pulled to the margin lands a rounding error short of it.
-    bad = (signed_out > -0.9 * settings.margin) & (signed_out < settings.band)
+    bad = (signed_out > -0.9 * settings.margin) & ((signed_out < settings.band) | far)
     idx = cand[bad]
     if not len(idx):
         return idx, np.zeros((0, 3))
     signed_body, point_body = body.at(x, idx)[:2]
     keep = signed_body > 0  # a vertex inside the body is the repair's to move, outwards
     idx, p, c = idx[keep], x[idx[keep]], point_body[keep]
+    if outer.beyond is not None:
+        to_anchor = outer.beyond[idx]
+        c[to_anchor] = anchors[idx[to_anchor]]
     if not len(idx):
         return idx, np.zeros((0, 3))
     span = np.maximum(np.linalg.norm(p - c, axis=1), 1e-12)
@@ -119,11 +178,18 @@ def squeeze_layer(
     body: ClosestPoint,
     floor: float,
     settings: SqueezeSettings = SqueezeSettings(),
+    anchors: np.ndarray | None = None,
 ) -> SqueezeResult:
     """Pull garment ``vertices (V, 3)``, ``faces (F, 3)`` towards the ``body`` mesh, inside the
-    ``outer`` layers that cover it, but no closer to the body than ``floor`` (m)."""
+    ``outer`` layers that cover it, but no closer to the body than ``floor`` (m). With ``anchors``
+    (``(V, 3)``, ``BodyAnchors.on`` this body) vertices under an outer layer by the segment test are
+    pulled too (``beyond``)."""
     x0 = np.asarray(vertices, dtype=np.float64)
     x = x0.copy()
+    if anchors is not None:
+        for layer in outer:
+            layer.beyond = beyond(x0, anchors, layer)
+            layer.covered = layer.covered | layer.beyond
     adjacency = vertex_neighbours(np.asarray(faces), len(x))
     kept = [KeptQueries(layer.mesh, len(x)) for layer in outer]
     on_body = KeptQueries(body, len(x))
@@ -132,7 +198,7 @@ def squeeze_layer(
         u = np.zeros_like(x)
         held = np.zeros(len(x), dtype=bool)
         for layer, queries in zip(outer, kept, strict=True):
-            idx, target = _pulls(x + u, layer, queries, on_body, floor, settings)
+            idx, target = _pulls(x + u, layer, queries, on_body, floor, settings, anchors)
             u[idx] = target - x[idx]
             held[idx] = True
         outside = int(held.sum())

@@ -81,7 +81,8 @@ def _squeeze(models, layer_ids, beta, fitted, world, faces, body: ClosestPoint) 
             outer.append(Outer(meshes[i], near, h < 0))
         if outer:
             floor = (j + 1) * DEFAULT_SQUEEZE.margin  # room for the garments under this one
-            r = squeeze_layer(out[j], faces[j], outer, body, floor, DEFAULT_SQUEEZE)
+            anchors = models.anchors(layer_ids[j + 1]).on(body.vertices, body.faces)
+            r = squeeze_layer(out[j], faces[j], outer, body, floor, DEFAULT_SQUEEZE, anchors)
             out[j] = r.vertices if np.all(np.isfinite(r.vertices)) else out[j]
     return out
 

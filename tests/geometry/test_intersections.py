@@ -382,3 +382,21 @@ def test_grid_cells_hold_boxes_whose_sides_fall_on_cell_boundaries_after_roundin
                 spike = np.array([[0.0, 0.0, -1.0], [0.01, 0.0, 1.0], [-0.01, 0.01, 1.0]]) * size
                 expected = intersecting_pairs_reference(spike, ONE_FACE, vertices, faces[near])
                 assert pair_set(grid.crossing(spike, ONE_FACE)) == pair_set(expected)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_segment_crossings_match_reference_and_count_a_sphere_once(seed: int):
+    from service.geometry.intersections import segment_crossings, segment_crossings_reference
+
+    sphere = trimesh.creation.icosphere(subdivisions=2, radius=0.1)
+    v, f = np.asarray(sphere.vertices), np.asarray(sphere.faces, dtype=np.int64)
+    rng = np.random.default_rng(seed)
+    p = rng.normal(0, 0.02, (300, 3))  # inside
+    q = p + rng.normal(0, 0.12, (300, 3))  # inside or outside
+    counts = segment_crossings(TriangleGrid.build(v, f), p, q)
+    np.testing.assert_array_equal(counts, segment_crossings_reference(v, f, p, q))
+    # Clearly inside the faceted sphere (within its inscribed radius) or clearly outside it.
+    r = np.linalg.norm(q, axis=1)
+    inside, outside = r < 0.095, r > 0.1
+    assert inside.sum() > 20 and outside.sum() > 20
+    assert np.all(counts[inside] == 0) and np.all(counts[outside] == 1)

@@ -71,3 +71,30 @@ def test_the_floor_keeps_room_for_the_garments_under_the_squeezed_one():
     everywhere = np.ones(len(v), dtype=bool)
     r = squeeze_layer(v, f, [Outer(outer, everywhere, everywhere)], body, 3 * settings.margin, settings)
     np.testing.assert_allclose(r.vertices[:, 2], 3 * settings.margin, atol=1e-9)
+
+
+def test_cloth_hanging_far_outside_is_pulled_in_when_the_outer_layer_lies_between_it_and_its_body_point():
+    # An inner sheet 8 cm off the body, 7 cm outside the outer sheet: beyond the band, and the field
+    # says "not covered" (a loose sleeve under a narrower one). The segment from each vertex's body
+    # point to it crosses the outer sheet once: it is under it.
+    settings = SqueezeSettings()
+    body = ClosestPoint.build(*_sheet(30, 0.5, 0.0))
+    outer = ClosestPoint.build(*_sheet(24, 0.4, 0.01))
+    v, f = _sheet(20, 0.3, 0.08)
+    near, covered = np.ones(len(v), dtype=bool), np.zeros(len(v), dtype=bool)
+    alone = squeeze_layer(v, f, [Outer(outer, near, covered)], body, settings.margin, settings)
+    np.testing.assert_array_equal(alone.vertices, v)
+    anchors = v * [1, 1, 0]
+    r = squeeze_layer(v, f, [Outer(outer, near, covered)], body, settings.margin, settings, anchors)
+    assert r.outside == 0
+    assert np.all(r.vertices[:, 2] <= 0.01 - 0.9 * settings.margin)
+    assert np.all(r.vertices[:, 2] >= settings.margin - 1e-9)
+    assert len(intersecting_pairs(r.vertices, f, outer.vertices, outer.faces)) == 0
+    # Where the segment passes no outer cloth (the outer sheet is cut away), nothing moves.
+    holed = ClosestPoint.build(*_sheet(24, 0.4, 0.01))
+    keep = np.all(holed.vertices[holed.faces][:, :, 0] < 0, axis=1)  # the outer covers x < 0 only
+    half = ClosestPoint.build(holed.vertices, holed.faces[keep])
+    r = squeeze_layer(v, f, [Outer(half, near, covered)], body, settings.margin, settings, anchors)
+    far = v[:, 0] > 0.1
+    np.testing.assert_array_equal(r.vertices[far], v[far])
+    assert np.all(r.vertices[v[:, 0] < -0.05, 2] <= 0.01 - 0.9 * settings.margin)
