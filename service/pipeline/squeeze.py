@@ -143,8 +143,8 @@ def _pulls(x: np.ndarray, outer: Outer, kept: KeptQueries, body: KeptQueries, fl
     signed_body, point_body = body.at(x, idx)[:2]
     keep = signed_body > 0  # a vertex inside the body is the repair's to move, outwards
     idx, p, c = idx[keep], x[idx[keep]], point_body[keep]
-    if outer.beyond is not None:
-        to_anchor = outer.beyond[idx]
+    to_anchor = np.zeros(len(idx), dtype=bool) if outer.beyond is None else outer.beyond[idx]
+    if to_anchor.any():
         c[to_anchor] = anchors[idx[to_anchor]]
     if not len(idx):
         return idx, np.zeros((0, 3))
@@ -168,6 +168,16 @@ def _pulls(x: np.ndarray, outer: Outer, kept: KeptQueries, body: KeptQueries, fl
         walking, signed = walking[keep], signed[keep]
         if not len(walking):
             break
+    # The straight way to an anchor can pass the body elsewhere (a sleeve's anchor on the arm seen from
+    # under the armpit): back off halfway, up to three times, while the target is under the floor.
+    back = np.flatnonzero(to_anchor & (s < 1))
+    for _ in range(3):
+        if not len(back):
+            break
+        under = body.mesh.query(c[back] + s[back, None] * (p - c)[back]).signed < floor
+        back = back[under]
+        s[back] = 0.5 * (1 + s[back])
+    s[back] = 1.0  # still under it: this vertex waits (the repair lifts what is left)
     return idx, c + s[:, None] * (p - c)
 
 
