@@ -96,6 +96,10 @@ def check_garment_ids(garments: tuple[str, ...], allowed: list[str], max_garment
         raise InvalidField("garments", f"repeated id(s) {repeated}", listing)
 
 
+class RefusedOrder(InvalidField):
+    """A garment order no cloth can take (``service.pipeline.layering``): a 422 on ``garments``."""
+
+
 ORDER_RULE = "an order cloth can take (README, 'Layer orders'): swap the garments named, or drop one"
 
 
@@ -104,7 +108,7 @@ def check_order(refusals: list) -> None:
     (``service.pipeline.layering``)."""
     if refusals:
         reasons = "; ".join(r.reason for r in refusals)
-        raise InvalidField("garments", f"order refused: {reasons}", ORDER_RULE)
+        raise RefusedOrder("garments", f"order refused: {reasons}", ORDER_RULE)
 
 
 def model_version(models_dir: Path) -> str:

@@ -15,7 +15,7 @@ from collections.abc import Callable
 from concurrent.futures import Future
 
 from service.pipeline.catalog import load_catalog, verified_imports
-from service.pipeline.tryon import Engine, ModelEngine, OutfitResult, OutfitSpec, self_test
+from service.pipeline.tryon import Engine, ModelEngine, OutfitResult, OutfitSpec, RefusedOrder, self_test
 from service.process.manifest import MANIFEST_NAME, REFRESH_COMMAND, verify_manifest
 from service.server.cache import OutfitCache
 from service.server.metrics import Metrics
@@ -174,7 +174,11 @@ class TryOn:
             return key, cached, True
         if key not in self._inflight:
             self.worker.check_room()  # refuse a full house before spending time on validation
-        engine.validate(spec)  # before counting a miss: an invalid request is no cache lookup
+        try:
+            engine.validate(spec)  # before counting a miss: an invalid request is no cache lookup
+        except RefusedOrder:
+            self.metrics.rejected.labels("layer_order").inc()
+            raise
         self.metrics.cache.labels("miss").inc()
         timeout = self.settings.request_timeout_s
         future = self._submit(key, spec, engine, time.monotonic() + timeout)

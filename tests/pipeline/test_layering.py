@@ -131,3 +131,5 @@ def test_the_service_names_the_refused_garments_and_why():
         )
         ok = client.post("/v1/outfits", json={"garments": ["pants", "skirt"], "options": {"untangle": False}})
         assert ok.status_code == 200, ok.text
+        metrics = client.get("/metrics").text
+        assert 'ulnef_outfit_rejected_total{reason="layer_order"} 1.0' in metrics
