@@ -87,10 +87,15 @@ def barycentric(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> n
     return np.column_stack([1 - v - w, v, w])
 
 
-def beyond(x: np.ndarray, anchors: np.ndarray, outer: Outer) -> np.ndarray:
+def beyond(x: np.ndarray, anchors: np.ndarray, outer: Outer, kept: KeptQueries) -> np.ndarray:
     """``(V,)`` bool: near vertices of ``x (V, 3)`` whose segment from their anchor ``(V, 3)`` crosses
-    the outer mesh an odd number of times."""
-    ask = np.flatnonzero(outer.near)
+    the outer mesh an odd number of times. Asked only where the squeeze may move a vertex: those the
+    field does not count as covered, and covered ones outside the outer mesh (``kept``: closest points
+    on it, which the squeeze's first round then reuses). Covered vertices already under the outer
+    layer, nearly all of a garment worn in the usual order, are not asked."""
+    covered = np.flatnonzero(outer.near & outer.covered)
+    far = covered[kept.at(x, covered)[0] > 0] if len(covered) else covered
+    ask = np.union1d(np.flatnonzero(outer.near & ~outer.covered), far)
     out = np.zeros(len(x), dtype=bool)
     if len(ask):
         grid = TriangleGrid.build(outer.mesh.vertices, outer.mesh.faces)
@@ -196,12 +201,12 @@ def squeeze_layer(
     pulled too (``beyond``)."""
     x0 = np.asarray(vertices, dtype=np.float64)
     x = x0.copy()
+    kept = [KeptQueries(layer.mesh, len(x)) for layer in outer]
     if anchors is not None:
-        for layer in outer:
-            layer.beyond = beyond(x0, anchors, layer)
+        for layer, queries in zip(outer, kept, strict=True):
+            layer.beyond = beyond(x0, anchors, layer, queries)
             layer.covered = layer.covered | layer.beyond
     adjacency = vertex_neighbours(np.asarray(faces), len(x))
-    kept = [KeptQueries(layer.mesh, len(x)) for layer in outer]
     on_body = KeptQueries(body, len(x))
     outside = 0
     for round_ in range(settings.rounds + 1):
