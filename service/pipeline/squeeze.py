@@ -126,6 +126,9 @@ class SqueezeResult:
     outside: int  # covered vertices still outside an outer layer (within band) at the end
 
 
+STALL_AFTER = 2
+"""Rounds after which a round that pulls no fewer vertices than the one before is the last but one
+(the rounds that used to be the whole squeeze: a garment worn in the usual order is done by then)."""
 STEPS = 4  # of the walk towards the body; a vertex still outside after them waits for the next round
 
 
@@ -208,7 +211,7 @@ def squeeze_layer(
             layer.covered = layer.covered | layer.beyond
     adjacency = vertex_neighbours(np.asarray(faces), len(x))
     on_body = KeptQueries(body, len(x))
-    outside = 0
+    outside, last, final = 0, None, False
     for round_ in range(settings.rounds + 1):
         u = np.zeros_like(x)
         held = np.zeros(len(x), dtype=bool)
@@ -217,11 +220,15 @@ def squeeze_layer(
             u[idx] = target - x[idx]
             held[idx] = True
         outside = int(held.sum())
-        if not outside or round_ == settings.rounds:
+        if not outside or round_ == settings.rounds or final:
             break
+        # A handful of vertices the walk cannot bring in (blocked at the floor) would keep every
+        # round busy: once the count stops falling, one last round puts the pulled ones in place.
+        final = round_ == settings.rounds - 1 or (round_ >= STALL_AFTER and outside >= last)
+        last = outside
         region = dilate(held, adjacency, settings.ring)
         u = diffuse(u, held, region, adjacency, settings.smoothing)
-        if round_ < settings.rounds - 1:  # the last round puts the pulled vertices where they belong
+        if not final:  # the last round puts the pulled vertices where they belong
             u = diffuse(u, np.zeros_like(held), region, adjacency, settings.relax)
         x += u
     return SqueezeResult(x, np.any(x != x0, axis=1), outside)
