@@ -12,10 +12,10 @@ training used), one request at a time as the service runs them (no quality measu
 report's ``collision_free`` and ``crossing_pairs`` after the repair, and the time.
 
 ``--pairs`` (issue 21): every ordered pair of distinct catalog garments (inner first) on ``--bodies``
-held-out bodies plus two corners of the supported box (the shortest and lightest woman, the tallest
-and heaviest man). ``--stacks N``: N random stacks of 3-4 distinct garments in random order, the first
-four on the box's extreme corners, the rest on held-out shapes. Both with the quality measures. Per
-outfit:
+held-out bodies plus two corners of the supported box (the shortest and lightest man, the tallest
+and heaviest woman: gender 0 is male). ``--stacks N``: N random stacks of 3-4 distinct garments in
+random order, the first four on the box's extreme corners, the rest on held-out shapes. Both with the
+quality measures. Per outfit:
 - the crossing pairs;
 - the largest share of a garment's vertices inside an inner layer after the repair;
 - the largest Green strain of any garment against its explicit mesh on the same body, i.e. what the
