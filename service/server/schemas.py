@@ -83,7 +83,11 @@ class OutfitRequest(BaseModel):
     )
 
     garments: list[GarmentId] = Field(
-        min_length=1, max_length=MAX_GARMENTS, description="Garment ids, inner to outer, each at most once."
+        min_length=1,
+        max_length=MAX_GARMENTS,
+        description="Garment ids, inner to outer, each at most once. An order no cloth can take (pants "
+        "over a skirt) is refused with a 422 on `garments` that names the garments and why (README, "
+        "'Layer orders').",
     )
     body: BodyShape = Field(default_factory=BodyShape)
     options: OutfitOptions = Field(default_factory=OutfitOptions)
