@@ -54,6 +54,10 @@ class Outer:
     beyond: np.ndarray | None = None
     """(V,) bool: vertices found outside it by the segment test: covered, at any distance, and they
     walk to their anchors."""
+    looser_under: bool = True
+    """Whether the inner garment is the looser one (``layer_rank`` not below this one's, same category):
+    only then is the segment test asked. Worn the usual way, the field's cover is right, and the test's
+    anchor walks cost time and left 9 crossing pairs in four tops on a short, heavy body."""
 
 
 @dataclass(frozen=True)
@@ -207,6 +211,8 @@ def squeeze_layer(
     kept = [KeptQueries(layer.mesh, len(x)) for layer in outer]
     if anchors is not None:
         for layer, queries in zip(outer, kept, strict=True):
+            if not layer.looser_under:
+                continue
             layer.beyond = beyond(x0, anchors, layer, queries)
             layer.covered = layer.covered | layer.beyond
     adjacency = vertex_neighbours(np.asarray(faces), len(x))

@@ -78,7 +78,9 @@ def _squeeze(models, layer_ids, beta, fitted, world, faces, body: ClosestPoint) 
                 continue
             if i not in meshes:
                 meshes[i] = ClosestPoint.build(out[i], faces[i])
-            outer.append(Outer(meshes[i], near, h < 0))
+            inner_g, outer_g = models.catalog[layer_ids[j + 1]], models.catalog[layer_ids[i + 1]]
+            looser = inner_g.category == outer_g.category and inner_g.layer_rank >= outer_g.layer_rank
+            outer.append(Outer(meshes[i], near, h < 0, looser_under=looser))
         if outer:
             floor = (j + 1) * DEFAULT_SQUEEZE.margin  # room for the garments under this one
             anchors = models.anchors(layer_ids[j + 1]).on(body.vertices, body.faces)
