@@ -83,7 +83,8 @@ def _squeeze(models, layer_ids, beta, fitted, world, faces, body: ClosestPoint) 
             outer.append(Outer(meshes[i], near, h < 0, looser_under=looser))
         if outer:
             floor = (j + 1) * DEFAULT_SQUEEZE.margin  # room for the garments under this one
-            anchors = models.anchors(layer_ids[j + 1]).on(body.vertices, body.faces)
+            looser = any(o.looser_under for o in outer)  # else the segment test is never asked
+            anchors = models.anchors(layer_ids[j + 1]).on(body.vertices, body.faces) if looser else None
             r = squeeze_layer(out[j], faces[j], outer, body, floor, DEFAULT_SQUEEZE, anchors)
             out[j] = r.vertices if np.all(np.isfinite(r.vertices)) else out[j]
     return out
