@@ -33,7 +33,7 @@ mesh an odd number of times. Such vertices walk towards that body point, whateve
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -72,23 +72,12 @@ class BodyAnchors:
     def build(cls, rest: np.ndarray, mean_body: ClosestPoint) -> BodyAnchors:
         """Anchors of rest vertices ``(V, 3)`` at their closest points on the mean body."""
         q = mean_body.query(rest)
-        a, b, c = (mean_body.vertices[mean_body.faces[q.face, k]] for k in range(3))
-        return cls(q.face, barycentric(q.point, a, b, c))
+        return cls(q.face, q.bary)
 
     def on(self, body_vertices: np.ndarray, body_faces: np.ndarray) -> np.ndarray:
         """The anchors on a body of the same topology: ``(V, 3)`` points."""
         corners = body_vertices[body_faces[self.face]]  # (V, 3, 3)
         return np.einsum("vk,vkx->vx", self.bary, corners)
-
-
-def barycentric(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
-    """Weights ``(N, 3)`` of points ``p (N, 3)`` in triangles ``a, b, c (N, 3)`` (p in their plane)."""
-    e0, e1, d = b - a, c - a, p - a
-    d00, d01, d11 = (e0 * e0).sum(1), (e0 * e1).sum(1), (e1 * e1).sum(1)
-    d20, d21 = (d * e0).sum(1), (d * e1).sum(1)
-    den = np.maximum(d00 * d11 - d01 * d01, 1e-30)
-    v, w = (d11 * d20 - d01 * d21) / den, (d00 * d21 - d01 * d20) / den
-    return np.column_stack([1 - v - w, v, w])
 
 
 def beyond(x: np.ndarray, anchors: np.ndarray, outer: Outer, kept: KeptQueries) -> np.ndarray:
@@ -209,12 +198,12 @@ def squeeze_layer(
     x0 = np.asarray(vertices, dtype=np.float64)
     x = x0.copy()
     kept = [KeptQueries(layer.mesh, len(x)) for layer in outer]
-    if anchors is not None:
-        for layer, queries in zip(outer, kept, strict=True):
-            if not layer.looser_under:
-                continue
-            layer.beyond = beyond(x0, anchors, layer, queries)
-            layer.covered = layer.covered | layer.beyond
+    if anchors is not None:  # the caller's layers stay as they were
+        outer = [
+            replace(layer, beyond=(b := beyond(x0, anchors, layer, queries)), covered=layer.covered | b)
+            if layer.looser_under else layer
+            for layer, queries in zip(outer, kept, strict=True)
+        ]  # fmt: skip
     adjacency = vertex_neighbours(np.asarray(faces), len(x))
     on_body = KeptQueries(body, len(x))
     outside, last, final = 0, None, False
