@@ -8,10 +8,9 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-import yaml
-
 from service.process.jit_cache import seed_jit_cache
 from service.server.app import CATALOG_NOT_LOADED, create_app, try_load_catalog
+from service.server.routes.page import openapi_yaml
 from service.server.settings import Settings
 
 TABLE_COLUMNS = (
@@ -25,17 +24,9 @@ TABLE_COLUMNS = (
 )
 
 
-class _NoAliasDumper(yaml.SafeDumper):
-    """Writes shared sub-objects out in full instead of as YAML anchors, so the file reads plainly."""
-
-    def ignore_aliases(self, data) -> bool:
-        return True
-
-
 def render_openapi() -> str:
     """The app's OpenAPI schema as YAML, keys in FastAPI's order (stable across runs)."""
-    schema = create_app(Settings()).openapi()
-    return yaml.dump(schema, Dumper=_NoAliasDumper, sort_keys=False, allow_unicode=True, width=100)
+    return openapi_yaml(create_app(Settings()).openapi())
 
 
 def format_table(rows: list[dict]) -> str:

@@ -60,14 +60,38 @@ class OutfitSpec:
 
 @dataclass
 class OutfitResult:
-    """GLB bytes (glTF 2.0, Y up) and the JSON-able quality report."""
+    """GLB bytes (glTF 2.0, Y up, plain), the JSON-able quality report, and the layers the GLB was
+    written from (``GltfLayer``s or their tuples), kept so that a compact encoding asked for later
+    (``encoded``) needs no second outfit computation."""
 
     glb: bytes
     report: dict = field(default_factory=dict)
+    layers: list | None = None
+    _encoded: dict[str, bytes] = field(default_factory=dict, repr=False)
+
+    def encoded(self, compression: str) -> bytes:
+        """The GLB in ``compression`` (``service.pipeline.gltf.outfit_glb``), written on first use."""
+        if compression == "none":
+            return self.glb
+        data = self._encoded.get(compression)
+        if data is None:
+            if self.layers is None:
+                raise ValueError(f"no layers kept: cannot encode {compression!r}")
+            from service.pipeline.gltf import outfit_glb
+
+            data = self._encoded.setdefault(compression, outfit_glb(self.layers, compression))
+        return data
+
+    def has(self, compression: str) -> bool:
+        return compression == "none" or compression in self._encoded
 
     @property
     def nbytes(self) -> int:
-        return len(self.glb)
+        """Bytes held: every encoding written so far and the layers' vertices (faces are the
+        catalog's, shared by every outfit)."""
+        kept = sum(np.asarray(layer[1] if isinstance(layer, tuple) else layer.vertices).nbytes
+                   for layer in self.layers or ())  # fmt: skip
+        return len(self.glb) + sum(len(d) for d in self._encoded.values()) + kept
 
 
 class Engine(Protocol):
@@ -217,7 +241,7 @@ class ModelEngine:
         report = dict(outfit.report)
         report["numerical_fallback"] = flagged
         report["garments_served"] = [g for g, _, _ in garments]
-        return OutfitResult(outfit_glb(layers), report)
+        return OutfitResult(outfit_glb(layers), report, layers)
 
 
 def self_test(engine: Engine, garments: list[str], untangle: bool) -> OutfitResult:

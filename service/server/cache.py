@@ -1,8 +1,9 @@
 """LRU cache of recent outfits by outfit id (the canonical request and the model version).
 
 Bounded both by entry count and by bytes, so a burst of distinct outfits cannot grow memory past
-the budget. Thread-safe. An evicted outfit is gone: ``GET /v1/outfits/{id}.glb`` then answers 404
-and the client POSTs the request again (the id is a hash; it cannot be turned back into a request).
+the budget. Thread-safe. An outfit grows when a compact encoding of it is written: ``put`` it again
+and its size is counted anew. An evicted outfit is gone from this replica: its GLB URL
+(``service.server.outfit_url``) makes it again; the id URL ``/v1/outfits/{id}.glb`` answers 404.
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ class OutfitCache:
     def __init__(self, max_entries: int, max_bytes: int):
         self.max_entries = max_entries
         self.max_bytes = max_bytes
-        self._items: OrderedDict[str, OutfitResult] = OrderedDict()
+        self._items: OrderedDict[str, tuple[OutfitResult, int]] = OrderedDict()  # item, bytes counted
         self._bytes = 0
         self._lock = threading.Lock()
 
@@ -30,20 +31,22 @@ class OutfitCache:
 
     def get(self, key: str) -> OutfitResult | None:
         with self._lock:
-            item = self._items.get(key)
-            if item is not None:
-                self._items.move_to_end(key)
-            return item
+            entry = self._items.get(key)
+            if entry is None:
+                return None
+            self._items.move_to_end(key)
+            return entry[0]
 
     def put(self, key: str, item: OutfitResult) -> None:
-        if self.max_entries == 0 or item.nbytes > self.max_bytes:
-            return
+        size = item.nbytes
         with self._lock:
             old = self._items.pop(key, None)
             if old is not None:
-                self._bytes -= old.nbytes
-            self._items[key] = item
-            self._bytes += item.nbytes
+                self._bytes -= old[1]
+            if self.max_entries == 0 or size > self.max_bytes:
+                return
+            self._items[key] = (item, size)
+            self._bytes += size
             while len(self._items) > self.max_entries or self._bytes > self.max_bytes:
-                _, evicted = self._items.popitem(last=False)
-                self._bytes -= evicted.nbytes
+                _, (_, evicted) = self._items.popitem(last=False)
+                self._bytes -= evicted

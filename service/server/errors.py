@@ -16,6 +16,7 @@ from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException
 
 from service.pipeline.tryon import InvalidField
+from service.server import outfit_url
 from service.server.runtime import NotReady
 from service.server.schemas import ALLOWED
 from service.server.worker import DeadlineExceeded, Overloaded
@@ -53,7 +54,7 @@ def field_errors(errors: list[dict], garment_ids: list[str]) -> list[dict]:
             message = f"malformed JSON ({e.get('ctx', {}).get('error', 'decode error')})"
             path = ""
         else:
-            message = str(e.get("msg", "invalid"))
+            message = outfit_url.message(e)
         allowed = _allowed(path, kind == "extra_forbidden")
         if path.startswith("garments") and garment_ids:
             allowed += ": " + ", ".join(garment_ids)
@@ -80,6 +81,11 @@ def install(app: FastAPI, garment_ids: Callable[[], list[str]]) -> None:
                        "allowed": ALLOWED[""]}]  # fmt: skip
             return JSONResponse({"detail": _summary(errors), "errors": errors}, status_code=422)
         return await http_exception_handler(request, exc)
+
+    @app.exception_handler(outfit_url.QueryInvalid)
+    async def invalid_query(request: Request, exc: outfit_url.QueryInvalid) -> JSONResponse:
+        errors = field_errors(exc.errors, garment_ids())
+        return JSONResponse({"detail": _summary(errors), "errors": errors}, status_code=422)
 
     @app.exception_handler(InvalidField)
     async def invalid_field(request: Request, exc: InvalidField) -> JSONResponse:

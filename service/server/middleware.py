@@ -32,8 +32,10 @@ class BodyLimit:
         self.max_bytes = max_bytes
 
     def _too_large(self, send):
-        detail = f"request body too large: at most {self.max_bytes} bytes (setting ULNEF_MAX_BODY_BYTES)"
-        return _send_json(send, 413, {"detail": detail})
+        message = "request body too large"
+        allowed = f"at most {self.max_bytes} bytes (setting ULNEF_MAX_BODY_BYTES)"
+        errors = [{"field": "(request body)", "message": message, "allowed": allowed}]
+        return _send_json(send, 413, {"detail": f"{message}: {allowed}", "errors": errors})
 
     async def __call__(self, scope, receive, send):
         if scope["type"] != "http" or scope["method"] in ("GET", "HEAD", "OPTIONS"):

@@ -13,10 +13,13 @@ import threading
 import time
 from collections.abc import Callable
 from concurrent.futures import Future
+from dataclasses import replace
+from pathlib import Path
 
 from service.pipeline.catalog import load_catalog, verified_imports
 from service.pipeline.tryon import Engine, ModelEngine, OutfitResult, OutfitSpec, RefusedOrder, self_test
 from service.process.manifest import MANIFEST_NAME, REFRESH_COMMAND, verify_manifest
+from service.server.access import ApiKeys, KeysFileError, RateLimiter, read_digests
 from service.server.cache import OutfitCache
 from service.server.metrics import Metrics
 from service.server.settings import Settings
@@ -61,6 +64,22 @@ def load_engine(settings: Settings) -> Engine:
     return ModelEngine.load(settings.resolved_models_dir(), settings.onnx_threads, imported)
 
 
+def read_access(settings: Settings) -> tuple[ApiKeys | None, bytes | None]:
+    """The API keys and the URL signing secret the settings name (None: off); raises ``KeysFileError``."""
+    if settings.api_keys_file is None:
+        return None, None
+    keys = ApiKeys(read_digests(settings.api_keys_file))
+    if settings.url_secret_file is None:
+        return keys, None
+    try:
+        secret = Path(settings.url_secret_file).read_bytes().strip()
+    except OSError as e:
+        raise KeysFileError(f"URL secret file {settings.url_secret_file}: {e}") from None
+    if len(secret) < 16:
+        raise KeysFileError(f"URL secret file {settings.url_secret_file}: at least 16 bytes needed")
+    return keys, secret
+
+
 class TryOn:
     def __init__(self, settings: Settings, engine_factory: EngineFactory = load_engine):
         self.settings = settings
@@ -75,6 +94,8 @@ class TryOn:
         self._inflight_lock = threading.Lock()
         self._loader: threading.Thread | None = None
         self._reloading = threading.Lock()
+        self.keys, self.url_secret = read_access(settings)
+        self.limiter = RateLimiter(settings.rate_limit_per_minute, settings.rate_limit_burst)
 
     # ------------------------------------------------------------ start-up
 
@@ -113,12 +134,14 @@ class TryOn:
         try:
             if self.settings.verify_models:
                 check_models(self.settings)
+            keys, secret = read_access(self.settings)  # keys added or revoked since the start
             load_catalog.cache_clear()  # a garment deleted and imported again under its id is new
             engine = self.engine_factory(self.settings)
             if self.settings.self_test_garments:
                 self_test(engine, self.settings.self_test_garments, self.settings.self_test_untangle)
             before = set(self.engine.garment_ids()) if self.engine is not None else set()
             self.engine = engine
+            self.keys, self.url_secret = keys, secret
             self.ready, self.detail = True, "ok"
             self.metrics.ready.set(1)
             after = set(engine.garment_ids())
@@ -156,18 +179,24 @@ class TryOn:
     def outfit_id(self, spec: OutfitSpec) -> str:
         return spec.outfit_id(self.require_engine().model_version)
 
-    async def outfit(self, spec: OutfitSpec) -> tuple[str, OutfitResult, bool]:
-        """(outfit id, result, whether it came from the cache). Raises NotReady, InvalidField,
-        Overloaded, DeadlineExceeded."""
+    async def outfit(self, spec: OutfitSpec, compression: str = "none") -> tuple[str, OutfitResult, bool]:
+        """(outfit id, result with its ``compression`` encoding written, whether it came from the cache).
+        Raises NotReady, InvalidField, Overloaded, DeadlineExceeded."""
         engine = self.require_engine()
         key = spec.outfit_id(engine.model_version)
         try:
-            return await self._outfit(key, spec, engine)
+            key, result, cached = await self._outfit(key, spec, engine, compression)
         except Overloaded:
             self.metrics.rejected.labels("overloaded").inc()
             raise
+        if not result.has(compression):  # a cached outfit, or a shared job made for another encoding
+            await asyncio.to_thread(result.encoded, compression)
+            self.cache.put(key, result)  # counted again with its new encoding
+        return key, result, cached
 
-    async def _outfit(self, key: str, spec: OutfitSpec, engine: Engine) -> tuple[str, OutfitResult, bool]:
+    async def _outfit(
+        self, key: str, spec: OutfitSpec, engine: Engine, compression: str
+    ) -> tuple[str, OutfitResult, bool]:
         cached = self.cache.get(key)
         if cached is not None:
             self.metrics.cache.labels("hit").inc()
@@ -181,7 +210,7 @@ class TryOn:
             raise
         self.metrics.cache.labels("miss").inc()
         timeout = self.settings.request_timeout_s
-        future = self._submit(key, spec, engine, time.monotonic() + timeout)
+        future = self._submit(key, spec, engine, compression, time.monotonic() + timeout)
         # asyncio.wait, not wait_for: a timeout must not cancel a job other requests share.
         wrapped = asyncio.wrap_future(future)
         # A job that ends after its request gave up still ends with a result or an exception (dropped
@@ -196,26 +225,31 @@ class TryOn:
             self.metrics.rejected.labels("deadline").inc()
             raise
 
-    def _submit(self, key: str, spec: OutfitSpec, engine: Engine, deadline: float) -> Future[OutfitResult]:
+    def _submit(
+        self, key: str, spec: OutfitSpec, engine: Engine, compression: str, deadline: float
+    ) -> Future[OutfitResult]:
         """One job per distinct outfit: identical concurrent requests share it."""
         with self._inflight_lock:
             future = self._inflight.get(key)
             if future is not None:
                 return future
-            future = self.worker.submit(lambda: self._compute(key, spec, engine), deadline)
+            future = self.worker.submit(lambda: self._compute(key, spec, engine, compression), deadline)
             self._inflight[key] = future
             self._gauges()
         future.add_done_callback(lambda _: self._done(key))
         return future
 
-    def _compute(self, key: str, spec: OutfitSpec, engine: Engine) -> OutfitResult:
+    def _compute(self, key: str, spec: OutfitSpec, engine: Engine, compression: str) -> OutfitResult:
         self._gauges()
         result = engine.make(spec)
+        result.encoded(compression)
         self.metrics.observe_stages(result.report.get("seconds", {}))
         self.metrics.fallbacks.inc(len(result.report.get("numerical_fallback", [])))
         if result.report.get("collision_free") is False:
             self.metrics.with_crossings.inc()
         self.cache.put(key, result)
+        if spec.measure:  # the same GLB as without measures: its URL (measure-free) finds it here
+            self.cache.put(replace(spec, measure=False).outfit_id(engine.model_version), result)
         return result
 
     def _done(self, key: str) -> None:
@@ -230,6 +264,7 @@ class TryOn:
         self.metrics.cache_bytes.set(self.cache.nbytes)
 
     def cached_glb(self, outfit_id: str) -> bytes | None:
+        """The plain GLB of a cached outfit (the id URL), or None."""
         item = self.cache.get(outfit_id)
         self.metrics.cache.labels("hit" if item else "miss").inc()
         return item.glb if item else None

@@ -29,12 +29,18 @@ ALLOWED = {
     "gender",
     "body.weight_kg": f"a number from {WEIGHT_KG[0]:g} to {WEIGHT_KG[1]:g}; the exact range depends on "
     "gender and height",
-    "options": "an object with `untangle`, `include_body`, `measure`, `untangler`",
+    "options": "an object with `untangle`, `include_body`, `measure`, `untangler`, `compression`",
     "options.untangle": "true or false",
     "options.include_body": "true or false",
     "options.measure": "true or false",
     "options.untangler": "`neural` or `reference`",
+    "query": "the POST's fields as query parameters (`garments` comma-separated, `gender`, `height_cm`, "
+    "`weight_kg`, `untangle`, `include_body`, `untangler`, `compression`), and `v`, `k`, `sig` as made "
+    "by POST /v1/outfits",
+    "options.compression": "`none` (plain glTF), `quantized` (KHR_mesh_quantization) or `meshopt` "
+    "(EXT_meshopt_compression)",
 }
+Compression = Literal["none", "quantized", "meshopt"]
 CLOSED = ConfigDict(extra="forbid", strict=True)
 
 
@@ -64,6 +70,12 @@ class OutfitOptions(BaseModel):
     )
     untangler: Literal["neural", "reference"] = Field(
         default="neural", description="Untangling operator: the neural one or the exact reference."
+    )
+    compression: Compression = Field(
+        default="none",
+        description="GLB encoding: `none` (plain glTF, any viewer), `quantized` (KHR_mesh_quantization: "
+        "int16 positions, int8 normals) or `meshopt` (EXT_meshopt_compression on top; the viewer needs "
+        "meshopt's decoder). Not part of the outfit id: every encoding is the same outfit.",
     )
 
 

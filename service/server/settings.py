@@ -71,6 +71,24 @@ class Settings(BaseSettings):
         description="Bearer token of POST /v1/admin/reload (pick up new imports); unset: no admin endpoint.",
     )
 
+    # Access control of the outfit endpoints (service.server.access); off by default.
+    api_keys_file: Path | None = Field(
+        default=None,
+        description="File of sha256 hex digests of the accepted API keys, one a line; unset: no keys needed.",
+    )
+    url_secret_file: Path | None = Field(
+        default=None,
+        description="File holding the secret that signs GLB URLs (same on every replica), so a viewer "
+        "without an Authorization header can GET them; unset: GLB GETs need the key too.",
+    )
+    rate_limit_per_minute: float = Field(
+        default=120.0, gt=0, description="Outfit requests a key may send a minute."
+    )
+    rate_limit_burst: int = Field(default=30, ge=1, description="Requests a key may send at once.")
+    metrics_token: SecretStr | None = Field(
+        default=None, description="Bearer token of GET /metrics; unset: /metrics is open."
+    )
+
     def catalog_dir(self) -> Path | None:
         """Bundled catalog directory, or None to let ``service.pipeline.catalog`` use
         ``service.process.paths.models_dir()``."""

@@ -13,40 +13,12 @@ import httpx
 import pytest
 from fastapi.testclient import TestClient
 
-from service.pipeline.catalog import load_catalog
-from service.server.app import create_app
 from service.server.logs import JsonFormatter
-from service.server.settings import Settings
-from tests.service_tools import FakeEngine, live_server
+from tests.server.apps import make_app
+from tests.service_tools import live_server
 
 GLB = "model/gltf-binary"
 TINY = {"garments": ["pants", "tshirt"], "body": {"gender": 0.0, "height_cm": 180, "weight_kg": 80}}
-
-
-def make_app(models_dir: Path, delay: float = 0.0, crossings: int = 0, **overrides):
-    values = dict(models_dir=models_dir, verify_models=False, configure_logging=False,
-                  self_test_garments=[], self_test_untangle=False)  # fmt: skip
-    engine = {}
-
-    def factory(settings: Settings) -> FakeEngine:
-        engine["it"] = FakeEngine(load_catalog(settings.catalog_dir()), delay=delay, crossings=crossings)
-        return engine["it"]
-
-    app = create_app(Settings(**(values | overrides)), factory)
-    return app, engine
-
-
-@pytest.fixture
-def app_and_engine(fake_models_dir: Path):
-    app, engine = make_app(fake_models_dir)
-    with TestClient(app) as client:
-        assert app.state.tryon.wait_loaded(10)
-        yield client, engine
-
-
-@pytest.fixture
-def client(app_and_engine) -> TestClient:
-    return app_and_engine[0]
 
 
 def test_post_answers_json_with_a_glb_url(app_and_engine):
@@ -55,7 +27,9 @@ def test_post_answers_json_with_a_glb_url(app_and_engine):
     assert response.status_code == 200
     body = response.json()
     assert set(body) == {"id", "glb_url", "cached", "report"}
-    assert len(body["id"]) == 32 and body["glb_url"] == f"/v1/outfits/{body['id']}.glb"
+    assert len(body["id"]) == 32
+    query = "garments=pants,tshirt&gender=0&height_cm=180&weight_kg=80&v=fake"
+    assert body["glb_url"] == f"/v1/outfits.glb?{query}"
     assert body["cached"] is False and body["report"]["garments"] == ["pants", "tshirt"]
     glb = client.get(body["glb_url"])
     assert glb.status_code == 200 and glb.headers["content-type"] == GLB
@@ -82,7 +56,8 @@ def test_post_answers_the_glb_itself_for_accept_glb(client: TestClient):
     assert response.status_code == 200
     assert response.headers["content-type"] == GLB and response.content[:4] == b"glTF"
     outfit_id = response.headers["x-outfit-id"]
-    assert response.headers["content-location"] == f"/v1/outfits/{outfit_id}.glb"
+    assert response.headers["content-location"].startswith("/v1/outfits.glb?garments=pants,tshirt&")
+    assert client.get(response.headers["content-location"]).content == response.content
     assert client.get(f"/v1/outfits/{outfit_id}.glb").content == response.content
 
 
@@ -114,64 +89,69 @@ def test_same_outfit_same_id_whatever_the_spelling(client: TestClient):
 def test_unknown_glb_is_404(client: TestClient):
     response = client.get("/v1/outfits/" + "0" * 32 + ".glb")
     assert response.status_code == 404
-    assert response.json() == {"detail": f"outfit {'0' * 32} is not in the cache (evicted, or never made): "
-                                         "POST /v1/outfits again"}  # fmt: skip
+    assert response.json() == {"detail": f"outfit {'0' * 32} is not in this replica's cache (evicted, made "
+                                         "elsewhere, or never made): GET the `glb_url` of POST /v1/outfits "
+                                         "instead"}  # fmt: skip
 
 
-def test_evicted_glb_is_404(fake_models_dir: Path):
-    app, _ = make_app(fake_models_dir, cache_entries=1)
+def test_evicted_outfit_is_404_by_id_and_made_again_by_url(fake_models_dir: Path):
+    app, engine = make_app(fake_models_dir, cache_entries=1)
     with TestClient(app) as client:
         app.state.tryon.wait_loaded(10)
-        first = client.post("/v1/outfits", json={"garments": ["tshirt"]}).json()["glb_url"]
+        first = client.post("/v1/outfits", json={"garments": ["tshirt"]}).json()
         client.post("/v1/outfits", json={"garments": ["pants"]})
-        assert client.get(first).status_code == 404
+        assert client.get(f"/v1/outfits/{first['id']}.glb").status_code == 404
+        again = client.get(first["glb_url"])
+        assert again.status_code == 200 and again.headers["x-outfit-id"] == first["id"]
+        assert engine["it"].calls == 3
 
 
 ALLOWED_GARMENTS = "a list of 1-4 distinct garment ids, inner to outer (GET /v1/garments): tshirt, pants"
 ALLOWED_REQUEST = "a JSON object with `garments` (required), `body` and `options`"
 
 
-@pytest.mark.parametrize(
-    ("body", "field", "message", "allowed"),
-    [
-        ({"garments": ["cape"]}, "garments", "unknown id(s) ['cape']",
-         "1-4 distinct ids, inner to outer, from: tshirt, pants"),
-        ({"garments": []}, "garments", "List should have at least 1 item after validation, not 0",
-         ALLOWED_GARMENTS),
-        ({"garments": ["tshirt"] * 5}, "garments", "List should have at most 4 items after validation, not 5",
-         ALLOWED_GARMENTS),
-        ({"garments": ["tshirt", "tshirt"]}, "garments", "Value error, repeated id(s) ['tshirt']",
-         ALLOWED_GARMENTS),
-        ({"garments": [3]}, "garments.0", "Input should be a valid string", ALLOWED_GARMENTS),
-        ({"garments": "tshirt"}, "garments", "Input should be a valid list", ALLOWED_GARMENTS),
-        ({"garments": ["T-Shirt!"]}, "garments.0", "String should match pattern '^[a-z][a-z0-9_]{0,31}$'",
-         ALLOWED_GARMENTS),
-        ({"body": {}}, "garments", "Field required", ALLOWED_GARMENTS),
-        ({"garments": ["tshirt"], "body": {"gender": 2}}, "body.gender",
-         "Input should be less than or equal to 1", "a number from 0 (male) to 1 (female)"),
-        ({"garments": ["tshirt"], "body": {"gender": True}}, "body.gender", "Input should be a valid number",
-         "a number from 0 (male) to 1 (female)"),
-        ({"garments": ["tshirt"], "body": {"height_cm": "180"}}, "body.height_cm",
-         "Input should be a valid number",
-         "a number from 135 to 215; the exact range depends on gender"),
-        ({"garments": ["tshirt"], "body": {"weight_kg": -1}}, "body.weight_kg",
-         "Input should be greater than or equal to 25",
-         "a number from 25 to 155; the exact range depends on gender and height"),
-        ({"garments": ["tshirt"], "body": {"gender": 1, "height_cm": 210}}, "body.height_cm",
-         "height_cm=210 is too tall", "135.6-200.8"),
-        ({"garments": ["tshirt"], "body": {"age": 30}}, "body.age", "unknown field",
-         "an object with `gender`, `height_cm`, `weight_kg`"),
-        ({"garments": ["tshirt"], "options": {"untangle": "yes"}}, "options.untangle",
-         "Input should be a valid boolean", "true or false"),
-        ({"garments": ["tshirt"], "options": {"untangler": "magic"}}, "options.untangler",
-         "Input should be 'neural' or 'reference'", "`neural` or `reference`"),
-        ({"garments": ["tshirt"], "options": {"speed": 1}}, "options.speed", "unknown field",
-         "an object with `untangle`, `include_body`, `measure`, `untangler`"),
-        ({"garments": ["tshirt"], "colour": "red"}, "colour", "unknown field", ALLOWED_REQUEST),
-        (["tshirt"], "(request body)", "Input should be a valid dictionary or object to extract fields from",
-         ALLOWED_REQUEST),
-    ],
-)  # fmt: skip
+# (request body, field, message, allowed): also asked as GLB URLs (tests/server/test_outfit_url.py)
+BAD_INPUT = [
+    ({"garments": ["cape"]}, "garments", "unknown id(s) ['cape']",
+     "1-4 distinct ids, inner to outer, from: tshirt, pants"),
+    ({"garments": []}, "garments", "List should have at least 1 item after validation, not 0",
+     ALLOWED_GARMENTS),
+    ({"garments": ["tshirt"] * 5}, "garments", "List should have at most 4 items after validation, not 5",
+     ALLOWED_GARMENTS),
+    ({"garments": ["tshirt", "tshirt"]}, "garments", "repeated id(s) ['tshirt']",
+     ALLOWED_GARMENTS),
+    ({"garments": [3]}, "garments.0", "Input should be a valid string", ALLOWED_GARMENTS),
+    ({"garments": "tshirt"}, "garments", "Input should be a valid list", ALLOWED_GARMENTS),
+    ({"garments": ["T-Shirt!"]}, "garments.0", "String should match pattern '^[a-z][a-z0-9_]{0,31}$'",
+     ALLOWED_GARMENTS),
+    ({"body": {}}, "garments", "Field required", ALLOWED_GARMENTS),
+    ({"garments": ["tshirt"], "body": {"gender": 2}}, "body.gender",
+     "Input should be less than or equal to 1", "a number from 0 (male) to 1 (female)"),
+    ({"garments": ["tshirt"], "body": {"gender": True}}, "body.gender", "Input should be a valid number",
+     "a number from 0 (male) to 1 (female)"),
+    ({"garments": ["tshirt"], "body": {"height_cm": "180"}}, "body.height_cm",
+     "Input should be a valid number",
+     "a number from 135 to 215; the exact range depends on gender"),
+    ({"garments": ["tshirt"], "body": {"weight_kg": -1}}, "body.weight_kg",
+     "Input should be greater than or equal to 25",
+     "a number from 25 to 155; the exact range depends on gender and height"),
+    ({"garments": ["tshirt"], "body": {"gender": 1, "height_cm": 210}}, "body.height_cm",
+     "height_cm=210 is too tall", "135.6-200.8"),
+    ({"garments": ["tshirt"], "body": {"age": 30}}, "body.age", "unknown field",
+     "an object with `gender`, `height_cm`, `weight_kg`"),
+    ({"garments": ["tshirt"], "options": {"untangle": "yes"}}, "options.untangle",
+     "Input should be a valid boolean", "true or false"),
+    ({"garments": ["tshirt"], "options": {"untangler": "magic"}}, "options.untangler",
+     "Input should be 'neural' or 'reference'", "`neural` or `reference`"),
+    ({"garments": ["tshirt"], "options": {"speed": 1}}, "options.speed", "unknown field",
+     "an object with `untangle`, `include_body`, `measure`, `untangler`, `compression`"),
+    ({"garments": ["tshirt"], "colour": "red"}, "colour", "unknown field", ALLOWED_REQUEST),
+    (["tshirt"], "(request body)", "Input should be a valid dictionary or object to extract fields from",
+     ALLOWED_REQUEST),
+]  # fmt: skip
+
+
+@pytest.mark.parametrize(("body", "field", "message", "allowed"), BAD_INPUT)
 def test_bad_input_names_the_field_and_what_it_allows(client, body, field, message, allowed):
     response = client.post("/v1/outfits", json=body)
     assert response.status_code == 422, response.text
@@ -207,7 +187,9 @@ def test_body_that_is_not_utf8(client: TestClient):
 
 def test_oversized_body_is_413_with_or_without_content_length(client: TestClient):
     big = b'{"garments": ["tshirt"], "pad": "' + b"x" * 20_000 + b'"}'
-    expected = {"detail": "request body too large: at most 16384 bytes (setting ULNEF_MAX_BODY_BYTES)"}
+    allowed = "at most 16384 bytes (setting ULNEF_MAX_BODY_BYTES)"
+    expected = {"detail": f"request body too large: {allowed}", "errors": [
+        {"field": "(request body)", "message": "request body too large", "allowed": allowed}]}
     response = client.post("/v1/outfits", content=big, headers={"Content-Type": "application/json"})
     assert response.status_code == 413 and response.json() == expected
 
@@ -217,6 +199,15 @@ def test_oversized_body_is_413_with_or_without_content_length(client: TestClient
 
     streamed = client.post("/v1/outfits", content=chunks(), headers={"Content-Type": "application/json"})
     assert streamed.status_code == 413 and streamed.json() == expected
+
+
+def test_a_body_that_is_not_json_is_415(client: TestClient):
+    response = client.post("/v1/outfits", content=b"garments=tshirt", headers={"Content-Type": "text/plain"})
+    assert response.status_code == 415
+    assert response.json() == {"detail": "Content-Type 'text/plain': the body must be application/json"}
+    typed = client.post("/v1/outfits", content=json.dumps(TINY),
+                        headers={"Content-Type": "application/json; charset=utf-8"})  # fmt: skip
+    assert typed.status_code == 200
 
 
 def test_bad_outfit_id_is_422(client: TestClient):

@@ -42,7 +42,7 @@ def test_page_dresses_a_body(tmp_path: Path):
     assert summary["consoleErrors"] == []
     assert summary["layers"] == ["Shorts", "T-shirt"]
     assert summary["loaded"] is True, summary["status"]
-    assert summary["src"].startswith("/v1/outfits/") and summary["src"].endswith(".glb")
+    assert summary["src"].startswith("/v1/outfits.glb?garments=shorts,tshirt&")
     assert "shorts < tshirt" in summary["status"]
     rgb = np.asarray(image.open(shot).convert("RGB"))
     view = rgb[:, 320:]  # right of the controls column

@@ -1,12 +1,16 @@
-"""``POST /v1/outfits`` (JSON or the GLB itself, by Accept) and ``GET /v1/outfits/{id}.glb``."""
+"""``POST /v1/outfits`` (JSON or the GLB itself, by Accept), ``GET /v1/outfits.glb?<request>`` (any
+replica; ``service.server.outfit_url``) and ``GET /v1/outfits/{id}.glb`` (this replica's cache only)."""
 
 from __future__ import annotations
 
+import hmac
 from typing import Annotated
 
-from fastapi import APIRouter, Header, HTTPException, Path, Response
+from fastapi import APIRouter, Depends, Header, HTTPException, Path, Request, Response
 
-from service.server.routes.deps import TryOnDep
+from service.server import outfit_url
+from service.server.routes.deps import TryOnDep, authorize
+from service.server.runtime import TryOn
 from service.server.schemas import ErrorResponse, OutfitCreated, OutfitRequest
 
 GLB = "model/gltf-binary"
@@ -14,13 +18,18 @@ JSON = "application/json"
 OUTFIT_ID = r"^[0-9a-f]{32}$"
 # The id hashes the request and the model version, so the bytes behind a URL never change.
 IMMUTABLE = "public, max-age=31536000, immutable"
+# A GLB URL of another model version (or none) gets the serving models' outfit: revalidate it.
+REVALIDATE = "public, no-cache"
 
 router = APIRouter(prefix="/v1", tags=["outfits"])
 
 ERRORS = {
+    401: {"model": ErrorResponse, "description": "API keys are on and no valid key was sent."},
     413: {"model": ErrorResponse, "description": "Request body over the size limit."},
     422: {"model": ErrorResponse, "description":
           "A field is invalid; the message names it and what it allows."},
+    415: {"model": ErrorResponse, "description": "The body is not `application/json`."},
+    429: {"model": ErrorResponse, "description": "The key's rate limit; see Retry-After."},
     503: {"model": ErrorResponse, "description": "Not ready, or overloaded; see Retry-After."},
     504: {"model": ErrorResponse, "description": "The request's time budget ran out; see Retry-After."},
 }
@@ -58,42 +67,114 @@ def wants_glb(accept: str | None) -> bool | None:
     return glb > json_
 
 
+def json_body(content_type: Annotated[str | None, Header()] = None) -> None:
+    """415 for a body that is not JSON (FastAPI would read it as a string and complain about types)."""
+    kind = (content_type or JSON).split(";")[0].strip().lower()
+    if kind != JSON and not kind.endswith("+json"):
+        raise HTTPException(415, detail=f"Content-Type {kind!r}: the body must be {JSON}")
+
+
+def etag(outfit_id: str, compression: str) -> str:
+    """Strong ETag of one encoding of an outfit: the outfit id, suffixed for a compact encoding."""
+    return f'"{outfit_id}"' if compression == "none" else f'"{outfit_id}-{compression}"'
+
+
+def glb_answer(data: bytes, outfit_id: str, compression: str, cache_control: str, **headers) -> Response:
+    headers = {"ETag": etag(outfit_id, compression), "Cache-Control": cache_control,
+               "X-Outfit-Id": outfit_id, **headers}  # fmt: skip
+    return Response(data, media_type=GLB, headers=headers)
+
+
+def signed_url(tryon: TryOn, request: OutfitRequest, kid: str | None) -> str:
+    version = tryon.require_engine().model_version
+    return outfit_url.glb_url(request.spec(), request.options.compression, version, kid, tryon.url_secret)
+
+
 @router.post(
     "/outfits",
     response_model=OutfitCreated,
+    dependencies=[Depends(json_body)],
     responses={200: {"content": GLB_CONTENT, "description": "The outfit: JSON, or the GLB for "
                      f"`Accept: {GLB}`."}, 406: {"model": ErrorResponse}, **ERRORS},  # fmt: skip
 )
 async def create_outfit(
-    request: OutfitRequest, tryon: TryOnDep, accept: Annotated[str | None, Header()] = None
-) -> Response | OutfitCreated:
-    """Dress a body in garments (inner to outer). Repeated requests are served from a cache."""
+    request: OutfitRequest, tryon: TryOnDep, accept: Annotated[str | None, Header()] = None,
+    authorization: Annotated[str | None, Header()] = None,
+) -> Response | OutfitCreated:  # fmt: skip
+    """Dress a body in garments (inner to outer). Repeated requests are served from a cache. `glb_url`
+    is the GLB's URL on any replica (signed for the key, with API keys on)."""
     glb = wants_glb(accept)
     if glb is None:
         raise HTTPException(406, detail=f"Accept: allowed {JSON} (default) or {GLB}")
-    outfit_id, result, cached = await tryon.outfit(request.spec())
-    url = f"/v1/outfits/{outfit_id}.glb"
+    kid = authorize(tryon, authorization)
+    compression = request.options.compression
+    outfit_id, result, cached = await tryon.outfit(request.spec(), compression)
+    url = signed_url(tryon, request, kid)
     if glb:
-        headers = {"X-Outfit-Id": outfit_id, "Content-Location": url, "Cache-Control": IMMUTABLE}
-        return Response(result.glb, media_type=GLB, headers=headers)
+        data = result.encoded(compression)
+        return glb_answer(data, outfit_id, compression, IMMUTABLE, **{"Content-Location": url})
     return OutfitCreated(id=outfit_id, glb_url=url, cached=cached, report=result.report)
+
+
+QUERY_DOC = (
+    "The outfit request as query parameters: `garments` (comma-separated, inner to outer), `gender`, "
+    "`height_cm`, `weight_kg`, `untangle`, `include_body`, `untangler`, `compression` (each as in the "
+    "POST body, same rules and messages), `v` (model version), and with API keys on `k` and `sig`. "
+    "Use the `glb_url` a POST returns rather than building it."
+)
+
+
+@router.get(
+    outfit_url.PATH.removeprefix("/v1"),
+    response_class=Response,
+    responses={200: {"content": GLB_CONTENT, "description": "The outfit's GLB (`ETag`: the outfit id; "
+                     "immutable when `v` is the serving model version)."},
+               304: {"description": "`If-None-Match` names this outfit's ETag."},
+               **{k: v for k, v in ERRORS.items() if k not in (413, 415)}},  # fmt: skip
+)
+async def get_outfit_by_url(
+    http: Request, tryon: TryOnDep, if_none_match: Annotated[str | None, Header()] = None,
+    authorization: Annotated[str | None, Header()] = None,
+) -> Response:  # fmt: skip
+    """The GLB of the outfit the query describes, from any replica: made here (the same bytes as
+    anywhere else) when this replica has not made it yet."""
+    query = outfit_url.parse_query(list(http.query_params.multi_items()))
+    spec, compression = query.request.spec(), query.request.options.compression
+    version = tryon.require_engine().model_version
+    signed_by = None
+    if tryon.keys is not None and tryon.url_secret is not None and query.key_id and query.sig:
+        version_signed = query.version or ""
+        expected = outfit_url.signature(tryon.url_secret, query.key_id, spec, compression, version_signed)
+        if hmac.compare_digest(expected, query.sig) and tryon.keys.knows(query.key_id):
+            signed_by = query.key_id
+    authorize(tryon, authorization, signed_by)
+    outfit_id = spec.outfit_id(version)
+    cache_control = IMMUTABLE if query.version == version else REVALIDATE
+    tag = etag(outfit_id, compression)
+    headers = {"ETag": tag, "Cache-Control": cache_control, "X-Outfit-Id": outfit_id}
+    if if_none_match is not None and tag in {t.strip() for t in if_none_match.split(",")}:
+        return Response(status_code=304, headers=headers)
+    outfit_id, result, _ = await tryon.outfit(spec, compression)
+    return glb_answer(result.encoded(compression), outfit_id, compression, cache_control)
 
 
 @router.get(
     "/outfits/{outfit_id}.glb",
     response_class=Response,
-    responses={200: {"content": GLB_CONTENT, "description": "The outfit's GLB."},
-               404: {"model": ErrorResponse, "description": "Not in the cache: POST the request again."},
+    responses={200: {"content": GLB_CONTENT, "description": "The outfit's plain GLB."},
+               404: {"model": ErrorResponse, "description": "Not in this replica's cache: use `glb_url`."},
                422: ERRORS[422]},  # fmt: skip
 )
 def get_outfit_glb(
     outfit_id: Annotated[str, Path(pattern=OUTFIT_ID, description="`id` from POST /v1/outfits.")],
-    tryon: TryOnDep,
+    tryon: TryOnDep, authorization: Annotated[str | None, Header()] = None,
 ) -> Response:
-    """The GLB of an outfit made recently (usable as a 3D model URL). Outfits live in an LRU cache;
-    an evicted one answers 404 and is made again by repeating its POST."""
+    """The plain GLB of an outfit this replica made recently, by id (kept for existing clients). Only
+    the replica that made it has it, until its cache evicts it; `glb_url` works on every replica."""
+    authorize(tryon, authorization)
     data = tryon.cached_glb(outfit_id)
     if data is None:
-        detail = f"outfit {outfit_id} is not in the cache (evicted, or never made): POST /v1/outfits again"
+        detail = (f"outfit {outfit_id} is not in this replica's cache (evicted, made elsewhere, or never "
+                  "made): GET the `glb_url` of POST /v1/outfits instead")  # fmt: skip
         raise HTTPException(404, detail=detail)
-    return Response(data, media_type=GLB, headers={"Cache-Control": IMMUTABLE, "ETag": f'"{outfit_id}"'})
+    return glb_answer(data, outfit_id, "none", IMMUTABLE)

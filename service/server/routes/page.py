@@ -1,10 +1,12 @@
-"""The try-on page at ``/`` and its static files (vendored, never a CDN: it works offline)."""
+"""The try-on page at ``/``, its static files (vendored, never a CDN: it works offline), and the API
+description at ``/openapi.yaml`` (the committed file's text; ``/openapi.json`` is FastAPI's own)."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
-from fastapi import APIRouter
+import yaml
+from fastapi import APIRouter, Request, Response
 from fastapi.responses import FileResponse
 from fastapi.staticfiles import StaticFiles
 
@@ -20,3 +22,20 @@ def page() -> FileResponse:
 
 def static_files() -> StaticFiles:
     return StaticFiles(directory=STATIC_DIR)
+
+
+class _NoAliasDumper(yaml.SafeDumper):
+    """Writes shared sub-objects out in full instead of as YAML anchors, so the file reads plainly."""
+
+    def ignore_aliases(self, data) -> bool:
+        return True
+
+
+def openapi_yaml(schema: dict) -> str:
+    """An OpenAPI schema as YAML, keys in FastAPI's order (stable across runs): ``openapi.yaml``."""
+    return yaml.dump(schema, Dumper=_NoAliasDumper, sort_keys=False, allow_unicode=True, width=100)
+
+
+@router.get("/openapi.yaml")
+def openapi_document(request: Request) -> Response:
+    return Response(openapi_yaml(request.app.openapi()), media_type="application/yaml")

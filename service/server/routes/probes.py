@@ -2,11 +2,16 @@
 
 from __future__ import annotations
 
-from fastapi import APIRouter, Response
+import hmac
+from typing import Annotated
+
+from fastapi import APIRouter, Header, HTTPException, Response
 
 from service.server.metrics import CONTENT_TYPE
-from service.server.routes.deps import TryOnDep
-from service.server.schemas import Health, Readiness
+from service.server.routes.deps import SettingsDep, TryOnDep
+from service.server.schemas import ErrorResponse, Health, Readiness
+
+BAD_METRICS_TOKEN = "missing or wrong metrics token (Authorization: Bearer <ULNEF_METRICS_TOKEN>)"
 
 router = APIRouter(tags=["probes"])
 
@@ -31,8 +36,16 @@ def readyz(tryon: TryOnDep, response: Response) -> Readiness:
     "/metrics",
     response_class=Response,
     responses={200: {"content": {CONTENT_TYPE: {"schema": {"type": "string"}}},
-                     "description": "Prometheus text format."}},  # fmt: skip
+                     "description": "Prometheus text format."},
+               401: {"model": ErrorResponse, "description": BAD_METRICS_TOKEN}},  # fmt: skip
 )
-def metrics(tryon: TryOnDep) -> Response:
-    """Prometheus metrics: requests, latency per route and per pipeline stage, cache, queue depth."""
+def metrics(
+    tryon: TryOnDep, settings: SettingsDep, authorization: Annotated[str | None, Header()] = None
+) -> Response:
+    """Prometheus metrics: requests, latency per route and per pipeline stage, cache, queue depth.
+    Behind a bearer token when ``ULNEF_METRICS_TOKEN`` is set."""
+    if settings.metrics_token is not None:
+        expected = f"Bearer {settings.metrics_token.get_secret_value()}"
+        if authorization is None or not hmac.compare_digest(authorization.encode(), expected.encode()):
+            raise HTTPException(401, detail=BAD_METRICS_TOKEN, headers={"WWW-Authenticate": "Bearer"})
     return Response(tryon.metrics.render(), media_type=CONTENT_TYPE)

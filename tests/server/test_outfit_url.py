@@ -1,0 +1,160 @@
+"""GLB URLs that carry their request (``service.server.outfit_url``): any replica answers them with
+the same bytes, they validate like the POST, and they cache like immutable files (ETag, 304)."""
+
+from __future__ import annotations
+
+import gzip
+from pathlib import Path
+from urllib.parse import parse_qsl, urlencode, urlsplit
+
+import pytest
+from fastapi.testclient import TestClient
+
+from service.pipeline.tryon import OutfitSpec
+from service.server.outfit_url import glb_url, parse_query
+from service.server.schemas import ALLOWED
+from tests.server.apps import make_app
+from tests.server.test_api_outfits import BAD_INPUT, GLB, TINY
+
+IMMUTABLE = "public, max-age=31536000, immutable"
+
+
+@pytest.fixture
+def replicas(fake_models_dir: Path):
+    """Two apps over the same models that share nothing else (two replicas), and their engines."""
+    (a, ea), (b, eb) = make_app(fake_models_dir), make_app(fake_models_dir)
+    with TestClient(a) as one, TestClient(b) as two:
+        assert a.state.tryon.wait_loaded(10) and b.state.tryon.wait_loaded(10)
+        yield (one, ea), (two, eb)
+
+
+def test_url_round_trips_to_the_same_request():
+    spec = OutfitSpec(("pants", "tshirt"), 0.25, 180.5, 80.0, untangle=False, untangler="reference")
+    url = glb_url(spec, "meshopt", "v1")
+    assert url == ("/v1/outfits.glb?garments=pants,tshirt&gender=0.25&height_cm=180.5&weight_kg=80"
+                   "&untangle=false&untangler=reference&compression=meshopt&v=v1")  # fmt: skip
+    query = parse_query(parse_qsl(urlsplit(url).query))
+    assert query.request.spec() == spec and query.request.options.compression == "meshopt"
+    assert query.version == "v1" and query.key_id is None and query.sig is None
+    # Floats keep every digit: the id of the URL's request is the id of the POST's.
+    odd = OutfitSpec(("tshirt",), 1 / 3, 170.123456789, 70.0)
+    back = parse_query(parse_qsl(urlsplit(glb_url(odd, "none", "v1")).query)).request.spec()
+    assert back.outfit_id("v1") == odd.outfit_id("v1")
+
+
+def test_another_replica_makes_the_same_bytes(replicas):
+    (one, e1), (two, e2) = replicas
+    made = one.post("/v1/outfits", json=TINY).json()
+    elsewhere = two.get(made["glb_url"])
+    assert elsewhere.status_code == 200 and elsewhere.headers["content-type"] == GLB
+    assert elsewhere.content == one.get(made["glb_url"]).content
+    assert elsewhere.headers["etag"] == f'"{made["id"]}"' == elsewhere.headers["x-outfit-id"].join('""')
+    assert elsewhere.headers["cache-control"] == IMMUTABLE
+    assert e1["it"].calls == 1 and e2["it"].calls == 1  # each replica made it once, then cached it
+    assert two.get(made["glb_url"]).content == elsewhere.content and e2["it"].calls == 1
+
+
+def test_if_none_match_is_304_without_making_the_outfit(replicas):
+    (one, _), (two, e2) = replicas
+    made = one.post("/v1/outfits", json=TINY).json()
+    tag = f'"{made["id"]}"'
+    response = two.get(made["glb_url"], headers={"If-None-Match": f'"other", {tag}'})
+    assert response.status_code == 304 and response.content == b""
+    assert response.headers["etag"] == tag and response.headers["cache-control"] == IMMUTABLE
+    assert e2["it"].calls == 0
+    assert two.get(made["glb_url"], headers={"If-None-Match": '"other"'}).status_code == 200
+
+
+def test_a_url_of_another_model_version_is_served_but_revalidated(client):
+    made = client.post("/v1/outfits", json=TINY).json()
+    for url in (made["glb_url"].replace("v=fake", "v=older"), made["glb_url"].replace("&v=fake", "")):
+        response = client.get(url)
+        assert response.status_code == 200 and response.headers["cache-control"] == "public, no-cache"
+        assert response.headers["etag"] == f'"{made["id"]}"'
+
+
+def test_measures_do_not_change_the_url_nor_make_the_outfit_again(app_and_engine):
+    client, engine = app_and_engine
+    measured = client.post("/v1/outfits", json=TINY | {"options": {"measure": True}}).json()
+    plain = client.post("/v1/outfits", json=TINY).json()
+    assert measured["glb_url"] == plain["glb_url"] and measured["id"] != plain["id"]
+    assert client.get(measured["glb_url"]).status_code == 200 and engine["it"].calls == 1
+
+
+def as_query(body) -> list[tuple[str, str]] | None:
+    """A POST body as GLB URL parameters, or None where a query cannot say the same thing (a number
+    given as text, a non-list of garments, a field the URL does not have)."""
+    if not isinstance(body, dict) or set(body) - {"garments", "body", "options"}:
+        return None
+    items = []
+    if "garments" in body:
+        if not isinstance(body["garments"], list) or not all(isinstance(g, str) for g in body["garments"]):
+            return None
+        items.append(("garments", ",".join(body["garments"])))
+    for name, value in body.get("body", {}).items():
+        if name not in ("gender", "height_cm", "weight_kg") or type(value) not in (int, float):
+            return None
+        items.append((name, repr(value)))
+    for name, value in body.get("options", {}).items():
+        if name not in ("untangle", "include_body", "untangler") or type(value) is not str:
+            return None
+        items.append((name, value))
+    return items
+
+
+PARITY = [case for case in BAD_INPUT if as_query(case[0]) is not None]
+
+
+def test_parity_table_covers_the_usual_mistakes():
+    assert len(PARITY) >= 8
+
+
+@pytest.mark.parametrize(("body", "field", "message", "allowed"), PARITY)
+def test_bad_urls_get_the_posts_messages(client, body, field, message, allowed):
+    response = client.get(f"/v1/outfits.glb?{urlencode(as_query(body), safe=',')}")
+    assert response.status_code == 422, response.text
+    assert {"field": field, "message": message, "allowed": allowed} in response.json()["errors"]
+
+
+@pytest.mark.parametrize(
+    ("query", "field", "message", "allowed"),
+    [
+        ("height_cm=180", "garments", "Field required", ALLOWED["garments"] + ": tshirt, pants"),
+        ("garments=tshirt&height_cm=tall", "body.height_cm", "Input should be a valid number",
+         ALLOWED["body.height_cm"]),
+        ("garments=tshirt&untangle=1", "options.untangle", "Input should be a valid boolean",
+         "true or false"),
+        ("garments=tshirt&compression=zip", "options.compression",
+         "Input should be 'none', 'quantized' or 'meshopt'", ALLOWED["options.compression"]),
+        ("garments=tshirt&colour=red", "query.colour", "unknown field", ALLOWED["query"]),
+        ("garments=tshirt&v=a&v=b", "query.v", "given more than once", "see openapi.yaml"),
+        ("garments=tshirt&height_cm=170&height_cm=180", "query.height_cm", "given more than once",
+         "see openapi.yaml"),
+        ("garments=tshirt&gender=nan", "body.gender", "Input should be a finite number",
+         ALLOWED["body.gender"]),
+    ],
+)  # fmt: skip
+def test_bad_urls_name_the_parameter(client, query, field, message, allowed):
+    response = client.get(f"/v1/outfits.glb?{query}")
+    assert response.status_code == 422, response.text
+    assert {"field": field, "message": message, "allowed": allowed} in response.json()["errors"]
+
+
+def test_answers_are_gzipped_for_clients_that_ask(client):
+    made = client.post("/v1/outfits", json=TINY).json()
+    plain = client.get(made["glb_url"], headers={"Accept-Encoding": "identity"})
+    assert "content-encoding" not in plain.headers
+    # httpx decodes gzip transparently: compare the decoded bytes, and the raw stream's header.
+    with client.stream("GET", made["glb_url"], headers={"Accept-Encoding": "gzip"}) as zipped:
+        raw = b"".join(zipped.iter_raw())
+        assert zipped.headers["content-encoding"] == "gzip"
+    assert gzip.decompress(raw) == plain.content
+
+
+def test_openapi_yaml_is_served_and_docs_need_no_cdn(client):
+    from service.cli import render_openapi
+
+    response = client.get("/openapi.yaml")
+    assert response.status_code == 200 and response.headers["content-type"].startswith("application/yaml")
+    assert response.text == render_openapi()
+    assert client.get("/docs").status_code == 404 and client.get("/redoc").status_code == 404
