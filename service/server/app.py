@@ -11,20 +11,17 @@ from importlib.metadata import PackageNotFoundError, version
 
 from fastapi import FastAPI
 from fastapi.middleware.cors import CORSMiddleware
-from fastapi.middleware.gzip import GZipMiddleware
 from fastapi.routing import APIRoute
 
 from service.server import errors, logs
-from service.server.middleware import AccessLog, BodyLimit
+from service.server.middleware import AccessLog, BodyLimit, GzipJson
 from service.server.routes import admin, garments, outfits, page, probes
 from service.server.routes.garments import CATALOG_NOT_LOADED, try_load_catalog
 from service.server.runtime import EngineFactory, TryOn, load_engine
 from service.server.settings import Settings
 
 __all__ = ["CATALOG_NOT_LOADED", "create_app", "try_load_catalog"]
-# gzip for clients that ask (Accept-Encoding), on answers above 1 KB; level 6 measured in the README.
-GZIP_MIN_BYTES = 1024
-GZIP_LEVEL = 6
+
 
 
 def _reload_on_sighup(tryon: TryOn) -> None:
@@ -89,7 +86,7 @@ def create_app(settings: Settings | None = None, engine_factory: EngineFactory =
             allow_headers=["Content-Type", "Accept", "Authorization", "If-None-Match"],
             expose_headers=["X-Outfit-Id", "Content-Location", "ETag", "Retry-After"],
         )  # fmt: skip
-    app.add_middleware(GZipMiddleware, minimum_size=GZIP_MIN_BYTES, compresslevel=GZIP_LEVEL)
+    app.add_middleware(GzipJson)
     app.add_middleware(BodyLimit, max_bytes=settings.max_body_bytes)
     app.add_middleware(AccessLog, metrics=tryon.metrics)
     app.include_router(probes.router)

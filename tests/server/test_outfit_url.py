@@ -4,6 +4,7 @@ the same bytes, they validate like the POST, and they cache like immutable files
 from __future__ import annotations
 
 import gzip
+import json
 from pathlib import Path
 from urllib.parse import parse_qsl, urlencode, urlsplit
 
@@ -140,15 +141,19 @@ def test_bad_urls_name_the_parameter(client, query, field, message, allowed):
     assert {"field": field, "message": message, "allowed": allowed} in response.json()["errors"]
 
 
-def test_answers_are_gzipped_for_clients_that_ask(client):
-    made = client.post("/v1/outfits", json=TINY).json()
-    plain = client.get(made["glb_url"], headers={"Accept-Encoding": "identity"})
-    assert "content-encoding" not in plain.headers
-    # httpx decodes gzip transparently: compare the decoded bytes, and the raw stream's header.
-    with client.stream("GET", made["glb_url"], headers={"Accept-Encoding": "gzip"}) as zipped:
+def test_json_is_gzipped_for_clients_that_ask_and_glbs_are_not(client):
+    plain = client.get("/openapi.json", headers={"Accept-Encoding": "identity"})
+    assert "content-encoding" not in plain.headers and len(plain.content) >= 1024
+    # httpx decodes gzip itself: read the raw stream to see what was sent.
+    with client.stream("GET", "/openapi.json", headers={"Accept-Encoding": "gzip"}) as zipped:
         raw = b"".join(zipped.iter_raw())
-        assert zipped.headers["content-encoding"] == "gzip"
-    assert gzip.decompress(raw) == plain.content
+        assert zipped.headers["content-encoding"] == "gzip" and zipped.headers["vary"] == "Accept-Encoding"
+        assert int(zipped.headers["content-length"]) == len(raw) < len(plain.content)
+    assert json.loads(gzip.decompress(raw)) == plain.json()
+    small = client.post("/v1/outfits", json=TINY, headers={"Accept-Encoding": "gzip"})
+    assert len(small.content) < 1024 and "content-encoding" not in small.headers
+    with client.stream("GET", small.json()["glb_url"], headers={"Accept-Encoding": "gzip"}) as glb:
+        assert "content-encoding" not in glb.headers and b"".join(glb.iter_raw())[:4] == b"glTF"
 
 
 def test_openapi_yaml_is_served_and_docs_need_no_cdn(client):
