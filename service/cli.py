@@ -42,6 +42,7 @@ def format_table(rows: list[dict]) -> str:
 def cmd_serve(args: argparse.Namespace) -> int:
     import uvicorn
 
+    from service.server.access import KeysFileError
     from service.server.logs import configure
     from service.server.runtime import ModelIntegrityError, check_models
 
@@ -53,8 +54,13 @@ def cmd_serve(args: argparse.Namespace) -> int:
         except ModelIntegrityError as e:
             print(f"ulnef serve: {e}", file=sys.stderr)
             return 1
+    try:
+        app = create_app(settings)
+    except KeysFileError as e:  # a broken keys file must not leave the outfit endpoints open
+        print(f"ulnef serve: {e}", file=sys.stderr)
+        return 1
     uvicorn.run(
-        create_app(settings), host=settings.host, port=settings.port, log_level=settings.log_level,
+        app, host=settings.host, port=settings.port, log_level=settings.log_level,
         log_config=None, limit_concurrency=settings.max_connections, timeout_graceful_shutdown=20,
     )  # fmt: skip
     return 0

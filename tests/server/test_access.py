@@ -114,3 +114,13 @@ def test_keys_file_must_hold_digests_only(tmp_path: Path):
     with pytest.raises(KeysFileError, match="missing.txt"):
         read_digests(tmp_path / "missing.txt")
     assert read_digests(keys_file(tmp_path, KEY, OTHER)) == {digest(KEY), digest(OTHER)}
+
+
+def test_serve_refuses_to_start_on_a_broken_keys_file(tmp_path: Path, monkeypatch, capsys):
+    from service.cli import main
+
+    (tmp_path / "keys.txt").write_text("")  # the Kubernetes Secret as shipped, before it is filled
+    monkeypatch.setenv("ULNEF_API_KEYS_FILE", str(tmp_path / "keys.txt"))
+    monkeypatch.setenv("ULNEF_VERIFY_MODELS", "false")
+    assert main(["serve", "--port", "1"]) == 1
+    assert "ulnef serve: API keys file" in capsys.readouterr().err
