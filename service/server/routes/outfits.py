@@ -116,12 +116,28 @@ async def create_outfit(
     return OutfitCreated(id=outfit_id, glb_url=url, cached=cached, report=result.report)
 
 
-QUERY_DOC = (
-    "The outfit request as query parameters: `garments` (comma-separated, inner to outer), `gender`, "
-    "`height_cm`, `weight_kg`, `untangle`, `include_body`, `untangler`, `compression` (each as in the "
-    "POST body, same rules and messages), `v` (model version), and with API keys on `k` and `sig`. "
-    "Use the `glb_url` a POST returns rather than building it."
-)
+def _param(name: str, schema: dict, description: str, required: bool = False) -> dict:
+    return {"name": name, "in": "query", "required": required, "schema": schema, "description": description}
+
+
+# Parsed by ``outfit_url.parse_query`` (one model, the POST's), declared here for clients and fuzzers.
+QUERY_PARAMETERS = [
+    _param("garments", {"type": "string", "pattern": r"^[a-z][a-z0-9_]*(,[a-z][a-z0-9_]*)*$"},
+           "Garment ids, inner to outer, comma-separated (the POST's `garments`).", required=True),
+    _param("gender", {"type": "number", "minimum": 0, "maximum": 1}, "The POST's `body.gender`."),
+    _param("height_cm", {"type": "number"}, "The POST's `body.height_cm`."),
+    _param("weight_kg", {"type": "number"}, "The POST's `body.weight_kg`."),
+    _param("untangle", {"type": "boolean"}, "The POST's `options.untangle`."),
+    _param("include_body", {"type": "boolean"}, "The POST's `options.include_body`."),
+    _param("untangler", {"type": "string", "enum": ["neural", "reference"]},
+           "The POST's `options.untangler`."),
+    _param("compression", {"type": "string", "enum": ["none", "quantized", "meshopt"]},
+           "The POST's `options.compression`."),
+    _param("v", {"type": "string"}, "Model version the URL was made for; another (or none): served by the "
+           "serving models with `Cache-Control: public, no-cache`."),
+    _param("k", {"type": "string"}, "API key id of a signed URL."),
+    _param("sig", {"type": "string"}, "Signature of a signed URL (POST /v1/outfits makes it)."),
+]  # fmt: skip
 
 
 @router.get(
@@ -131,6 +147,7 @@ QUERY_DOC = (
                      "immutable when `v` is the serving model version)."},
                304: {"description": "`If-None-Match` names this outfit's ETag."},
                **{k: v for k, v in ERRORS.items() if k not in (413, 415)}},  # fmt: skip
+    openapi_extra={"parameters": QUERY_PARAMETERS},
 )
 async def get_outfit_by_url(
     http: Request, tryon: TryOnDep, if_none_match: Annotated[str | None, Header()] = None,
