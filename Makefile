@@ -11,12 +11,12 @@ TORCH_PIN := $(shell grep -o '"torch==[^"]*"' pyproject.toml | head -n 1 | tr -d
 
 JS_DIR := tests/js
 
-.PHONY: serve test lint models pictures clean distclean chromium
+.PHONY: serve test lint models pictures clean distclean chromium nginx
 
 serve: $(VENV)/.installed-serve
 	$(BIN)/ulnef serve
 
-test: $(VENV)/.installed-test $(JS_DIR)/node_modules/.installed chromium
+test: $(VENV)/.installed-test $(JS_DIR)/node_modules/.installed chromium nginx
 	$(BIN)/ruff check .
 	$(BIN)/pytest
 
@@ -78,6 +78,16 @@ chromium:
 		{ apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium >/dev/null; } || \
 		echo "apt-get could not install chromium" >&2
 	@command -v chromium >/dev/null || echo "chromium not found (Debian: apt-get install chromium): the page test will skip" >&2
+
+# Debian's nginx for the two-replica proxy test (tests/deploy/test_proxy.py), the same way: only as
+# root and only when missing. It lives in /usr/sbin, which a non-root PATH may lack.
+nginx:
+	@{ command -v nginx || [ -x /usr/sbin/nginx ]; } >/dev/null || [ "$$(id -u)" != 0 ] || \
+		! command -v apt-get >/dev/null || \
+		{ apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq nginx >/dev/null; } || \
+		echo "apt-get could not install nginx" >&2
+	@{ command -v nginx || [ -x /usr/sbin/nginx ]; } >/dev/null || \
+		echo "nginx not found (Debian: apt-get install nginx): the proxy test will skip" >&2
 
 clean:
 	rm -rf build dist *.egg-info .pytest_cache .ruff_cache

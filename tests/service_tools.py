@@ -1,4 +1,5 @@
-"""Helpers for the HTTP tests: a fake engine, a live server in a thread, external tools (node, chromium).
+"""Helpers for the HTTP tests: a fake engine, a live server in a thread or real `ulnef serve` processes,
+external tools (node, chromium, nginx).
 
 External tools skip their tests on a developer machine that lacks them, but fail them in CI
 (``CI=true``), where `make test` installs them: a missing tool must not pass silently there.
@@ -6,10 +7,14 @@ External tools skip their tests on a developer machine that lacks them, but fail
 
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
+import signal
 import socket
 import subprocess
+import sys
+import tempfile
 import threading
 import time
 from collections.abc import Iterator
@@ -24,6 +29,7 @@ from service.pipeline.catalog import Garment
 from service.pipeline.gltf import outfit_glb
 from service.pipeline.tryon import InvalidField, OutfitResult, OutfitSpec, check_garment_ids
 
+REPO = Path(__file__).resolve().parents[1]
 JS_DIR = Path(__file__).parent / "js"
 NODE_MODULES = JS_DIR / "node_modules"
 CHROMIUM = os.environ.get("CHROMIUM", "/usr/bin/chromium")
@@ -37,7 +43,7 @@ def require(condition: bool, what: str) -> None:
     """Skip (developer machine) or fail (CI) when ``condition`` is false."""
     if condition:
         return
-    message = f"{what} missing: run `make test` (it installs node packages and chromium)"
+    message = f"{what} missing: run `make test` (it installs node packages, chromium and nginx)"
     if in_ci():
         pytest.fail(message)
     pytest.skip(message)
@@ -97,7 +103,7 @@ class FakeEngine:
         report = {"garments": list(spec.garments), "numerical_fallback": [],
                   "collision_free": self.crossings == 0, "crossing_pairs": self.crossings,
                   "seconds": {"body": 0.0, "total": self.delay}}  # fmt: skip
-        return OutfitResult(outfit_glb(layers), report)
+        return OutfitResult(outfit_glb(layers), report, layers)
 
 
 def free_port() -> int:
@@ -126,3 +132,58 @@ def live_server(app, limit_concurrency: int | None = None, ready_timeout: float 
     finally:
         server.should_exit = True
         thread.join(30)
+
+
+@contextmanager
+def serve_processes(count: int, env: dict[str, str] | None = None, ready_timeout: float = 120,
+                    log_dir: Path | None = None) -> Iterator[list[str]]:  # fmt: skip
+    """``count`` real ``ulnef serve`` processes (the committed models) on free loopback ports, started
+    at once, with the extra ``ULNEF_*`` settings ``env``; yields their base URLs once every /readyz
+    is 200. Fails the test, quoting the process's log, when one exits or is not ready in time. The
+    processes are always stopped (SIGTERM, then SIGKILL to their process group after 10 s)."""
+    import httpx  # the serve extra's test client; only the tests that start servers need it
+
+    log_dir = log_dir or Path(tempfile.mkdtemp(prefix="ulnef-serve-"))
+    base = {**os.environ, "ULNEF_LOG_LEVEL": "warning", **(env or {})}
+    procs: list[tuple[subprocess.Popen, str, Path]] = []
+    try:
+        for i in range(count):
+            port, log = free_port(), log_dir / f"serve-{i}.log"
+            cmd = [sys.executable, "-m", "service.cli", "serve", "--host", "127.0.0.1", "--port", str(port)]
+            with log.open("wb") as out:
+                proc = subprocess.Popen(cmd, cwd=REPO, env=base, stdout=out, stderr=subprocess.STDOUT,
+                                        start_new_session=True)  # fmt: skip
+            procs.append((proc, f"http://127.0.0.1:{port}", log))
+        deadline = time.monotonic() + ready_timeout
+        for proc, url, log in procs:
+            while True:
+                if proc.poll() is not None:
+                    tail = log.read_text()[-3000:]
+                    pytest.fail(f"ulnef serve at {url} exited ({proc.returncode}):\n{tail}")
+                try:
+                    if httpx.get(f"{url}/readyz", timeout=5).status_code == 200:
+                        break
+                except httpx.HTTPError:
+                    pass
+                if time.monotonic() > deadline:
+                    pytest.fail(f"ulnef serve at {url}: /readyz not 200 in {ready_timeout:g} s:\n"
+                                f"{log.read_text()[-3000:]}")  # fmt: skip
+                time.sleep(0.2)
+        yield [url for _, url, _ in procs]
+    finally:
+        for proc, _, _ in procs:
+            stop_process_group(proc)
+
+
+def stop_process_group(proc: subprocess.Popen, grace: float = 10) -> None:
+    """SIGTERM ``proc`` (started with ``start_new_session=True``); after ``grace`` s SIGKILL its
+    whole process group, so that no child it started outlives the test."""
+    if proc.poll() is None:
+        proc.terminate()
+        try:
+            proc.wait(grace)
+        except subprocess.TimeoutExpired:
+            pass
+    with contextlib.suppress(ProcessLookupError, PermissionError):
+        os.killpg(proc.pid, signal.SIGKILL)
+    proc.wait()

@@ -79,6 +79,13 @@ def etag(outfit_id: str, compression: str) -> str:
     return f'"{outfit_id}"' if compression == "none" else f'"{outfit_id}-{compression}"'
 
 
+def matches(if_none_match: str, tag: str) -> bool:
+    """Whether ``If-None-Match`` names ``tag``: weak comparison (RFC 9110 13.1.2), because a proxy that
+    gzips the GLB (deploy/nginx) hands out ``W/"<id>"``; ``*`` matches any answer."""
+    tags = {t.strip().removeprefix("W/") for t in if_none_match.split(",")}
+    return "*" in tags or tag.removeprefix("W/") in tags
+
+
 def glb_answer(data: bytes, outfit_id: str, compression: str, cache_control: str, **headers) -> Response:
     headers = {"ETag": etag(outfit_id, compression), "Cache-Control": cache_control,
                "X-Outfit-Id": outfit_id, **headers}  # fmt: skip
@@ -169,7 +176,7 @@ async def get_outfit_by_url(
     cache_control = IMMUTABLE if query.version == version else REVALIDATE
     tag = etag(outfit_id, compression)
     headers = {"ETag": tag, "Cache-Control": cache_control, "X-Outfit-Id": outfit_id}
-    if if_none_match is not None and tag in {t.strip() for t in if_none_match.split(",")}:
+    if if_none_match is not None and matches(if_none_match, tag):
         return Response(status_code=304, headers=headers)
     outfit_id, result, _ = await tryon.outfit(spec, compression)
     return glb_answer(result.encoded(compression), outfit_id, compression, cache_control)
