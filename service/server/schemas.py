@@ -13,6 +13,7 @@ from typing import Annotated, Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, StringConstraints, field_validator
 
 from service.pipeline.catalog import Category
+from service.pipeline.gltf import Compression
 from service.pipeline.outfit import MAX_GARMENTS
 from service.pipeline.tryon import OutfitSpec
 
@@ -40,7 +41,6 @@ ALLOWED = {
     "options.compression": "`none` (plain glTF), `quantized` (KHR_mesh_quantization) or `meshopt` "
     "(EXT_meshopt_compression)",
 }
-Compression = Literal["none", "quantized", "meshopt"]
 CLOSED = ConfigDict(extra="forbid", strict=True)
 
 

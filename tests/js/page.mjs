@@ -1,8 +1,9 @@
 // Headless Chromium (playwright-core, Debian's chromium) on the try-on page:
 //   node page.mjs URL SCREENSHOT.png
-// picks a T-shirt and shorts, presses Dress, waits until the 3D view shows the returned GLB,
-// saves a screenshot and prints a JSON summary. Any request leaving the server fails the run
-// (the page must work offline), and so does any console error.
+// picks a T-shirt and shorts, then for each GLB encoding of PAGE_COMPRESSIONS (default "none") picks
+// it, presses Dress, waits until the 3D view has loaded the returned GLB, saves a screenshot
+// (SCREENSHOT-<encoding>.png) and records the GLB it fetched; prints a JSON summary. Any request
+// leaving the server fails the run (the page must work offline), and so does any console error.
 import { mkdtempSync, rmSync } from "node:fs";
 import { tmpdir } from "node:os";
 import { join } from "node:path";
@@ -14,9 +15,18 @@ const executablePath = process.env.CHROMIUM || "/usr/bin/chromium";
 const userDataDir = mkdtempSync(join(tmpdir(), "ulnef-chromium-"));
 const garments = (process.env.PAGE_GARMENTS || "tshirt,shorts").split(",");
 const untangle = process.env.PAGE_UNTANGLE !== "0";
+const compressions = (process.env.PAGE_COMPRESSIONS || "none").split(",");
 const timeout = Number(process.env.PAGE_TIMEOUT_MS || 120000);
 
-const summary = { outside: [], consoleErrors: [], status: "" };
+const summary = { outside: [], consoleErrors: [], runs: [] };
+const glbs = {}; // GLB path and query -> {bytes, extensionsRequired}
+
+function glbSummary(body) {
+  if (body.length < 20 || body.toString("latin1", 0, 4) !== "glTF") return { bytes: body.length };
+  const doc = JSON.parse(body.toString("utf8", 20, 20 + body.readUInt32LE(12)));
+  return { bytes: body.length, extensionsRequired: doc.extensionsRequired || [] };
+}
+
 const context = await chromium.launchPersistentContext(userDataDir, {
   executablePath,
   headless: true,
@@ -34,21 +44,43 @@ try {
   });
   page.on("console", (m) => { if (m.type() === "error") summary.consoleErrors.push(m.text()); });
   page.on("pageerror", (e) => summary.consoleErrors.push(String(e)));
+  page.on("response", async (response) => {
+    const { pathname, search } = new URL(response.url());
+    if (pathname.endsWith(".glb") && response.ok()) glbs[pathname + search] = glbSummary(await response.body());
+  });
   await page.goto(url);
   await page.waitForSelector("body[data-ready=true]", { timeout: 30000 });
   for (const id of garments) await page.check(`input[name=garment][value=${id}]`);
   if (!untangle) await page.uncheck("#untangle");
   summary.layers = await page.$$eval("#layers li", (items) => items.map((li) => li.firstChild.textContent));
-  await page.click("#dress");
-  await page.waitForFunction(() => {
-    const viewer = document.querySelector("model-viewer");
-    return viewer.loaded && viewer.modelIsVisible || document.querySelector("#status.error");
-  }, null, { timeout, polling: 250 });
-  summary.status = await page.textContent("#status");
-  summary.src = await page.$eval("model-viewer", (v) => v.src);
-  summary.loaded = await page.$eval("model-viewer", (v) => v.loaded);
-  await page.waitForTimeout(1500); // let the first frames and the shadow settle
-  await page.screenshot({ path: screenshot });
+  for (const compression of compressions) {
+    await page.selectOption("#compression", compression);
+    // The viewer's next load or error event (its `loaded` stays true from the last model until then).
+    await page.evaluate(() => {
+      const viewer = document.querySelector("model-viewer");
+      window.viewerEvent = null;
+      viewer.addEventListener("load", () => { window.viewerEvent = "load"; }, { once: true });
+      viewer.addEventListener("error", (e) => {
+        window.viewerEvent = `error: ${e.detail?.sourceError || e.detail?.type}`;
+      }, { once: true });
+    });
+    await page.click("#dress");
+    await page.waitForFunction(() => window.viewerEvent || document.querySelector("#status.error"),
+                               null, { timeout, polling: 250 });
+    await page.waitForFunction(() => window.viewerEvent !== "load"
+                                     || document.querySelector("model-viewer").modelIsVisible,
+                               null, { timeout, polling: 250 });
+    const event = await page.evaluate(() => window.viewerEvent);
+    const run = { compression, event, status: await page.textContent("#status") };
+    run.src = await page.$eval("model-viewer", (v) => v.src);
+    run.loaded = await page.$eval("model-viewer", (v) => v.loaded);
+    await page.waitForTimeout(1500); // let the first frames and the shadow settle
+    run.screenshot = screenshot.replace(/\.png$/, "") + `-${compression}.png`;
+    await page.screenshot({ path: run.screenshot });
+    const { pathname, search } = new URL(run.src, origin);
+    run.glb = glbs[pathname + search] || null;
+    summary.runs.push(run);
+  }
 } finally {
   await context.close();
   rmSync(userDataDir, { recursive: true, force: true });

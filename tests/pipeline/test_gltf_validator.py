@@ -57,8 +57,10 @@ def test_validator_catches_a_broken_glb(tmp_path: Path):
     assert validate([path])[str(path)]["numErrors"] > 0
 
 
-def test_a_textured_glb_has_no_validator_errors(tmp_path: Path):
-    """UVs of a display mesh with seams, base colour and normal textures, an image shared by two layers."""
+@pytest.mark.parametrize("compression", ["none", "quantized", "meshopt"])
+def test_a_textured_glb_has_no_validator_errors(tmp_path: Path, compression: str):
+    """UVs of a display mesh with seams, base colour and normal textures, an image shared by two layers;
+    compact encodings: UVs beyond [0, 1] under KHR_texture_transform (meshopt: its views decoded too)."""
     from service.pipeline.appearance import DisplayMesh, Material
     from service.pipeline.gltf import GltfLayer
     from tests.meshes import grid_mesh
@@ -76,10 +78,18 @@ def test_a_textured_glb_has_no_validator_errors(tmp_path: Path):
         GltfLayer("tshirt", v + [0, 0, 0.01], f, display, knit),
         GltfLayer("jacket", v + [0, 0, 0.02], f, display, denim),
     ]
-    path = tmp_path / "textured.glb"
-    path.write_bytes(outfit_glb(layers))
-    report = validate([path])[str(path)]
-    assert report["numErrors"] == 0, report["errors"]
+    data = outfit_glb(layers, compression)
+    paths = [tmp_path / "textured.glb"]
+    paths[0].write_bytes(data)
+    if compression == "meshopt":
+        pytest.importorskip("wasmtime")
+        from service.pipeline.gltf_read import decompressed
+
+        paths.append(tmp_path / "decoded.glb")
+        paths[1].write_bytes(decompressed(data))
+    reports = validate(paths)
+    for path in paths:
+        assert reports[str(path)]["numErrors"] == 0, reports[str(path)]["errors"]
 
 
 def test_the_avatar_glb_has_no_validator_errors(tmp_path: Path):

@@ -1,5 +1,6 @@
 """The try-on page in headless Chromium (playwright-core + Debian's chromium) on the committed models:
-pick a T-shirt and shorts, press Dress, wait for the 3D view, screenshot it, check the pixels.
+pick a T-shirt and shorts, press Dress in each GLB encoding, wait for the 3D view, screenshot it,
+check the pixels.
 
 Refresh the committed screenshot: ``ULNEF_UPDATE_SCREENSHOT=1 .venv/bin/pytest tests/server/test_page.py``
 (writes docs/images/page.png). Skipped without node/chromium except in CI, where it fails.
@@ -28,7 +29,14 @@ def share_above(rgb: np.ndarray, high: int, low: int, margin: int = 60) -> float
     return float(np.mean(rgb[..., high].astype(int) > rgb[..., low].astype(int) + margin))
 
 
-def test_page_dresses_a_body(tmp_path: Path):
+COMPRESSIONS = ("none", "quantized", "meshopt")
+EXTENSIONS = {"none": [], "quantized": ["KHR_mesh_quantization"],
+              "meshopt": ["KHR_mesh_quantization", "EXT_meshopt_compression"]}  # fmt: skip
+
+
+def test_page_dresses_a_body_in_every_glb_encoding(tmp_path: Path):
+    """One browser session dresses the body once per encoding of the page's select (the outfit is made
+    once, then served from the cache): each GLB, meshopt's included, is shown with no CDN."""
     pytest.importorskip("onnxruntime")
     image = pytest.importorskip("PIL.Image")
     require_node("playwright-core")
@@ -36,19 +44,32 @@ def test_page_dresses_a_body(tmp_path: Path):
     settings = Settings(self_test_untangle=False, configure_logging=False, request_timeout_s=600)
     shot = tmp_path / "page.png"
     with live_server(create_app(settings)) as base:
-        summary = json.loads(run_node("page.mjs", f"{base}/", str(shot), timeout=600,
-                                      env={"PAGE_TIMEOUT_MS": "570000"}))  # fmt: skip
+        env = {"PAGE_TIMEOUT_MS": "500000", "PAGE_COMPRESSIONS": ",".join(COMPRESSIONS)}
+        summary = json.loads(run_node("page.mjs", f"{base}/", str(shot), timeout=600, env=env))
     assert summary["outside"] == [], "the page must not load anything from outside the server"
     assert summary["consoleErrors"] == []
     assert summary["layers"] == ["Shorts", "T-shirt"]
-    assert summary["loaded"] is True, summary["status"]
-    assert summary["src"].startswith("/v1/outfits.glb?garments=shorts,tshirt&")
-    assert "shorts < tshirt" in summary["status"]
-    rgb = np.asarray(image.open(shot).convert("RGB"))
-    view = rgb[:, 320:]  # right of the controls column
-    # The T-shirt (red, service.pipeline.gltf.COLORS) and the shorts (teal) are on screen.
-    red, green = 0, 1
-    assert share_above(view, red, green) > 0.02, "no T-shirt red in the 3D view"
-    assert share_above(view, green, red) > 0.01, "no shorts teal in the 3D view"
+    assert [r["compression"] for r in summary["runs"]] == list(COMPRESSIONS)
+    views = {}
+    for run in summary["runs"]:
+        c = run["compression"]
+        assert run["event"] == "load" and run["loaded"] is True, (c, run["event"], run["status"])
+        assert run["src"].startswith("/v1/outfits.glb?garments=shorts,tshirt&")
+        assert ("compression=" + c in run["src"]) or c == "none", run["src"]
+        assert "shorts < tshirt" in run["status"]
+        required = [e for e in run["glb"]["extensionsRequired"] if e != "KHR_texture_transform"]
+        assert required == EXTENSIONS[c], (c, run["glb"])
+        rgb = np.asarray(image.open(run["screenshot"]).convert("RGB"))
+        views[c] = view = rgb[:, 320:]  # right of the controls column
+        # The T-shirt (red, service.pipeline.gltf.COLORS) and the shorts (teal) are on screen.
+        red, green = 0, 1
+        assert share_above(view, red, green) > 0.02, f"{c}: no T-shirt red in the 3D view"
+        assert share_above(view, green, red) > 0.01, f"{c}: no shorts teal in the 3D view"
+    sizes = [r["glb"]["bytes"] for r in summary["runs"]]
+    assert sizes == sorted(sizes, reverse=True), sizes
+    for c in COMPRESSIONS[1:]:
+        # the same outfit drawn: quantization moves points by micrometres, normals by < 1 degree
+        diff = np.abs(views[c].astype(int) - views["none"].astype(int)).max(axis=2)
+        assert np.mean(diff > 24) < 0.002, f"{c}: {np.mean(diff > 24):.4f} of the view differs"
     if os.environ.get("ULNEF_UPDATE_SCREENSHOT") == "1":
-        shutil.copyfile(shot, SCREENSHOT)
+        shutil.copyfile(tmp_path / "page-none.png", SCREENSHOT)

@@ -1,5 +1,13 @@
 // The try-on page: pick garments and their order, set the body, POST /v1/outfits, show the GLB.
 const $ = (id) => document.getElementById(id);
+
+// model-viewer decodes EXT_meshopt_compression once it is given a meshopt decoder's location (it loads
+// that script, then uses its bundled copy): the vendored official decoder, so no CDN is needed.
+const MESHOPT_DECODER = "/static/vendor/meshopt_decoder.js";
+customElements.whenDefined("model-viewer").then(() => {
+  customElements.get("model-viewer").meshoptDecoderLocation = MESHOPT_DECODER;
+});
+
 const layers = []; // garment ids, inner to outer
 let catalog = [];
 
@@ -54,7 +62,8 @@ async function dress() {
     garments: layers,
     body: { gender: Number($("gender").value), height_cm: Number($("height").value),
             weight_kg: Number($("weight").value) },
-    options: { untangle: $("untangle").checked, include_body: $("include-body").checked },
+    options: { untangle: $("untangle").checked, include_body: $("include-body").checked,
+               compression: $("compression").value },
   };
   $("dress").disabled = true;
   status("Dressing…");
