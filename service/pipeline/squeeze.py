@@ -122,6 +122,10 @@ class SqueezeResult:
 STALL_AFTER = 2
 """Rounds after which a round that pulls no fewer vertices than the one before is the last but one
 (the rounds that used to be the whole squeeze: a garment worn in the usual order is done by then)."""
+USUAL_ROUNDS = 3
+"""Rounds when no layer asks the segment test (``Outer.looser_under``): every garment worn the usual
+way is done within them (``benchmarks.outfits``: all clean, as with 3 rounds before the test came),
+and the rounds past them took 1-8 % of a request (`benchmarks.latency --compare`, body + 1..4)."""
 STEPS = 4  # of the walk towards the body; a vertex still outside after them waits for the next round
 
 
@@ -207,7 +211,8 @@ def squeeze_layer(
     adjacency = vertex_neighbours(np.asarray(faces), len(x))
     on_body = KeptQueries(body, len(x))
     outside, last, final = 0, None, False
-    for round_ in range(settings.rounds + 1):
+    rounds = settings.rounds if anchors is not None else min(settings.rounds, USUAL_ROUNDS)
+    for round_ in range(rounds + 1):
         u = np.zeros_like(x)
         held = np.zeros(len(x), dtype=bool)
         for layer, queries in zip(outer, kept, strict=True):
@@ -215,11 +220,11 @@ def squeeze_layer(
             u[idx] = target - x[idx]
             held[idx] = True
         outside = int(held.sum())
-        if not outside or round_ == settings.rounds or final:
+        if not outside or round_ == rounds or final:
             break
         # A handful of vertices the walk cannot bring in (blocked at the floor) would keep every
         # round busy: once the count stops falling, one last round puts the pulled ones in place.
-        final = round_ == settings.rounds - 1 or (round_ >= STALL_AFTER and outside >= last)
+        final = round_ == rounds - 1 or (round_ >= STALL_AFTER and outside >= last)
         last = outside
         region = dilate(held, adjacency, settings.ring)
         u = diffuse(u, held, region, adjacency, settings.smoothing)
