@@ -1,7 +1,7 @@
 """GLB size per encoding (``service.pipeline.gltf.Compression``), and what a client decodes from it.
 
     python -m benchmarks.glb_sizes [--garments pants,tshirt,jacket] [--repeats 5] [--threads 2]
-                                   [--all-outfits]
+                                   [--all-outfits] [--gzip]
 
 One untangled outfit on the committed models (default: body + pants + tshirt + jacket, gender 0,
 180 cm, 80 kg: issue 22's), written in each encoding: bytes, bytes after gzip (level 6, what HTTP
@@ -111,6 +111,24 @@ def rows(models, garments=DEFAULT_OUTFIT, repeats: int = 5, meshopt_decode: Mesh
     return out
 
 
+def gzip_table(layers, repeats: int) -> None:
+    """What gzip (HTTP compression, one core) costs and saves on each encoding, levels 1 and 6: why
+    the service sends GLBs as they are and leaves compression to a proxy (README, "HTTP caching")."""
+    print("\n## gzip of each encoding (median ms of one core)")
+    print("| variant | bytes | level 1 bytes | level 1 ms | level 6 bytes | level 6 ms |")
+    print("|---|---:|---:|---:|---:|---:|")
+    for variant in VARIANTS:
+        data, cells = outfit_glb(layers, variant), []
+        for level in (1, 6):
+            times = []
+            for _ in range(repeats):
+                t0 = time.perf_counter()
+                size = len(gzip.compress(data, level))
+                times.append(time.perf_counter() - t0)
+            cells.append(f"{size:,} | {1e3 * float(np.median(times)):.0f}")
+        print(f"| {variant} | {len(data):,} | {' | '.join(cells)} |")
+
+
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
@@ -119,6 +137,7 @@ def main(argv=None) -> None:
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--all-outfits", action="store_true")
+    parser.add_argument("--gzip", action="store_true", help="also time gzip of each encoding")
     args = parser.parse_args(argv)
     from service.pipeline.outfit import OutfitModels
 
@@ -130,6 +149,8 @@ def main(argv=None) -> None:
     for r in rows(models, garments, args.repeats):
         print(f"| {r['variant']} | {r['bytes']:,} | {r['gzip_bytes']:,} | {r['encode_ms']:.1f} "
               f"| {r['crossing_pairs']} | {100 * r['penetration']:.3f} |")  # fmt: skip
+    if args.gzip:
+        gzip_table(outfit_layers(models, garments)[0], args.repeats)
     if args.all_outfits:
         all_outfits(models)
 

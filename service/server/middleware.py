@@ -107,8 +107,8 @@ class AccessLog:
 
 class GzipJson:
     """gzip JSON answers of at least ``min_bytes`` for clients that accept it. GLBs go out as they are:
-    gzip takes a third off a plain GLB for 110-180 ms of a core (README, "Compact GLB"), as long as
-    the outfit itself; a proxy in front (``deploy/nginx``) compresses them where it pays."""
+    gzip takes a third off a plain GLB for 40-90 ms of a core (``benchmarks.glb_sizes --gzip``), a
+    quarter of the outfit itself; a proxy in front (``deploy/nginx``) compresses them where it pays."""
 
     def __init__(self, app, min_bytes: int = 1024, level: int = 6):
         self.app = app
