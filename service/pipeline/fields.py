@@ -24,7 +24,7 @@ from typing import Literal, NamedTuple
 
 import numpy as np
 
-from service.process.onnx_session import open_session
+from service.process.onnx_session import open_session, run_blocks
 from service.process.paths import models_dir
 
 BODY = "body"
@@ -83,10 +83,13 @@ class NeuralField:
     def __init__(self, field_id: str, directory: Path | None = None, threads: int = 2):
         directory = Path(directory or default_directory())
         self.field_id = field_id
-        self._values = open_session(directory / values_file(field_id), threads)
-        self._gradient = open_session(directory / gradient_file(field_id), threads)
+        self.threads = threads
+        # One intra-op thread per session: a call's batches run side by side on ``threads`` threads
+        # instead (``service.process.onnx_session.run_blocks``).
+        self._values = open_session(directory / values_file(field_id), 1)
+        self._gradient = open_session(directory / gradient_file(field_id), 1)
         path = directory / f_gradient_file(field_id)
-        self._f_gradient = open_session(path, threads) if path.is_file() else None
+        self._f_gradient = open_session(path, 1) if path.is_file() else None
 
     def __call__(self, x: np.ndarray, beta: np.ndarray, gradient: Gradient = False) -> FieldValues:
         """Fields at ``x (P, 3)`` for one shape ``beta (3,)``; ``gradient`` as ``Gradient``."""
@@ -103,17 +106,14 @@ class NeuralField:
             return self(x, beta[0], True)._replace(grad_h=np.zeros((len(x), 3)))
         session, names = (self._gradient, GRADIENT_NAMES) if gradient else (self._values, VALUE_NAMES)
         # Bounded batches bound the activations' memory (a jacket's 10k vertices with gradients
-        # would otherwise take ~100 MB at once); the per-call overhead is ~0.1 ms.
+        # would otherwise take ~100 MB at once).
         out = self._run(session, names, GRADIENT_BATCH if gradient else BATCH, x, beta)
         return FieldValues(*out) if gradient else FieldValues(out[0], out[1], None, None)
 
-    @staticmethod
-    def _run(session, names, batch: int, x: np.ndarray, beta: np.ndarray) -> list[np.ndarray]:
-        parts = [
-            session.run(list(names), dict(zip(INPUT_NAMES, (x[s : s + batch], beta), strict=True)))
-            for s in range(0, max(len(x), 1), batch)
-        ]
-        return [np.concatenate([p[k] for p in parts]).astype(np.float64) for k in range(len(names))]
+    def _run(self, session, names, batch: int, x: np.ndarray, beta: np.ndarray) -> list[np.ndarray]:
+        inputs = dict(zip(INPUT_NAMES, (x, beta), strict=True))
+        out = run_blocks(session, list(names), inputs, {INPUT_NAMES[0]}, batch, self.threads)
+        return [o.astype(np.float64) for o in out]
 
 
 class FieldSet:

@@ -26,6 +26,7 @@ from typing import NamedTuple
 import numpy as np
 
 from service.pipeline.untangle import settled
+from service.process.onnx_session import run_blocks
 from service.process.paths import models_dir
 
 N_SLOTS = 5
@@ -60,6 +61,10 @@ def default_directory() -> Path:
     return models_dir() / "untangler"
 
 
+BATCH = 8192
+"""Points per onnxruntime call: bounds the Jacobian graph's activations, as the fields' batches do."""
+
+
 class NeuralUntangleOutput(NamedTuple):
     """f: ``(B, N) float64`` untangled fields. jacobian: ``(B, N, 2N) float64``, ``d f_k / d f*_j`` in
     columns ``j < N`` and ``d f_k / d h*_j`` in column ``N + j``; only row k, ``(B, 1, 2N)``, when
@@ -79,8 +84,10 @@ class NeuralUntangler:
         self.config = json.loads((directory / CONFIG_FILE).read_text())
         self.delta = float(self.config["delta"])
         self.h_band = float(self.config["config"]["h_band"])
+        self.threads = threads
+        # One intra-op thread each: a call's batches run side by side (``run_blocks``).
         self._values, self._jacobian, self._row = (
-            open_session(directory / name, threads) for name in (VALUES_FILE, JACOBIAN_FILE, ROW_FILE)
+            open_session(directory / name, 1) for name in (VALUES_FILE, JACOBIAN_FILE, ROW_FILE)
         )
 
     def __call__(self, f_star, h_star, jacobian: bool = True, row: int | None = None) -> NeuralUntangleOutput:
@@ -94,14 +101,19 @@ class NeuralUntangler:
         f_in[:, :n], h_in[:, :n] = f_star, h_star
         feeds = dict(zip(INPUT_NAMES, (f_in, h_in), strict=True))
         cols = np.r_[0:n, N_SLOTS : N_SLOTS + n]
+        split = set(INPUT_NAMES)
+
+        def run(session, names):
+            return run_blocks(session, list(names), feeds, split, BATCH, self.threads)
+
         if not jacobian:
-            (f,) = self._values.run([OUTPUT_NAMES[0]], feeds)
+            (f,) = run(self._values, OUTPUT_NAMES[:1])
             return NeuralUntangleOutput(f[:, :n].astype(np.float64), None)
         if row is not None:
             feeds[ROW_INPUT] = np.eye(1, N_SLOTS, int(row), dtype=np.float32)
-            f, jac = self._row.run(list(ROW_OUTPUT_NAMES), feeds)
+            f, jac = run(self._row, ROW_OUTPUT_NAMES)
             return NeuralUntangleOutput(f[:, :n].astype(np.float64), jac[:, None, cols].astype(np.float64))
-        f, jac = self._jacobian.run(list(OUTPUT_NAMES), feeds)
+        f, jac = run(self._jacobian, OUTPUT_NAMES)
         return NeuralUntangleOutput(f[:, :n].astype(np.float64), jac[:, :n][:, :, cols].astype(np.float64))
 
     def screened(self, f_star, h_star, jacobian: bool = True, row: int | None = None) -> NeuralUntangleOutput:

@@ -13,6 +13,13 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
+
+from service.process.threads import pool
+
+MIN_BLOCK = 1024
+"""Points below which a call is not split over threads (handing a batch to a thread costs ~0.1 ms)."""
+
 
 def open_session(path: Path, threads: int):
     """An ``onnxruntime.InferenceSession`` on the CPU with ``threads`` intra-op threads."""
@@ -24,3 +31,32 @@ def open_session(path: Path, threads: int):
     options.enable_cpu_mem_arena = False
     options.add_session_config_entry("session.intra_op.allow_spinning", "0")
     return ort.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
+
+
+def run_blocks(session, names: list[str], inputs: dict, points: set[str], batch: int, threads: int) -> list:
+    """``session.run(names, inputs)`` with the ``points`` inputs (the others broadcast, e.g. a shape
+    beta (1, 3)) cut along their first axis into blocks (``blocks``), run side by side on ``threads``
+    threads, and the outputs joined again: the sessions have one intra-op thread each, since
+    onnxruntime's own threads, splitting every matrix product of a small network, did less (a field at
+    30,000 points: 17.2 ms for values and 35.1 ms with grad f on two intra-op threads, 12.3 and 28.6 ms
+    in batches on two threads). A point's answer does not depend on its batch (tested), so the result
+    is the one call's, bit for bit."""
+    n = len(next(v for k, v in inputs.items() if k in points))
+    parts = blocks(n, batch, threads)
+
+    def run(part: slice):
+        return session.run(names, {k: (v[part] if k in points else v) for k, v in inputs.items()})
+
+    out = [run(parts[0])] if len(parts) == 1 else list(pool("onnx", threads).map(run, parts))
+    return [np.concatenate([o[k] for o in out]) if len(out) > 1 else out[0][k] for k in range(len(names))]
+
+
+def blocks(n: int, batch: int, threads: int) -> list[slice]:
+    """Slices of ``n`` points for one evaluation: at most ``batch`` points each (bounded activations),
+    and from ``threads * MIN_BLOCK`` points as many as a multiple of ``threads`` (none waits alone
+    at the end)."""
+    count = max(1, -(-n // batch))
+    if threads > 1 and n >= threads * MIN_BLOCK:
+        count = -(-count // threads) * threads
+    edges = np.linspace(0, n, count + 1).round().astype(np.int64)
+    return [slice(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:], strict=True)]

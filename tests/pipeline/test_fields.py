@@ -271,3 +271,46 @@ def test_committed_fields_reproduce_their_recorded_held_out_errors():
         if fid != "body":  # the served body h is the constant -1, not the network's
             assert err["h_mm"] == pytest.approx(recorded[fid]["held_out"]["h_mm"], abs=0.01)
     assert recorded["tshirt"]["held_out"]["f_mm"] <= 1.5 and recorded["tshirt"]["held_out"]["h_mm"] <= 1.5
+
+
+def test_batches_on_two_threads_agree_with_one_call_on_one(tmp_path, monkeypatch):
+    """``run_blocks`` cuts a call into batches run side by side: the answer of one call, bit for bit."""
+    from export import fields as export_fields
+    from service.pipeline import fields as service_fields
+    from service.process import onnx_session
+
+    net = _net(8).float()
+    rng = np.random.default_rng(9)
+    x = (rng.normal(size=(5000, 3)) * 0.3 + [0, 0, 1]).astype(np.float32)
+    beta = np.array([[0.2, 0.4, 0.6]], dtype=np.float32)
+    export_fields.export_field(net, "probe", tmp_path, x[:300], beta)
+    one = service_fields.NeuralField("probe", tmp_path, threads=1)
+    two = service_fields.NeuralField("probe", tmp_path, threads=2)
+    monkeypatch.setattr(service_fields, "BATCH", 1000)
+    monkeypatch.setattr(service_fields, "GRADIENT_BATCH", 700)
+    calls = []
+    run = onnx_session.blocks
+    monkeypatch.setattr(onnx_session, "blocks", lambda *a: calls.append(run(*a)) or calls[-1])
+    for gradient in (False, True, "f"):
+        whole = one(x, beta[0], gradient)
+        split = two(x, beta[0], gradient)
+        for a, b in zip(split, whole, strict=True):
+            np.testing.assert_array_equal(a, b)
+    assert [len(c) for c in calls] == [5, 6, 8, 8, 8, 8]  # batches, an even count on two threads
+
+
+def test_blocks_cover_the_points_in_order_as_a_multiple_of_the_threads():
+    from service.process.onnx_session import MIN_BLOCK, blocks
+
+    for n, batch, threads in [(30000, 8192, 2), (30000, 4096, 2), (5000, 8192, 2), (2047, 8192, 2),
+                              (300, 64, 2), (0, 8192, 2), (30000, 8192, 1), (9000, 4096, 3)]:  # fmt: skip
+        parts = blocks(n, batch, threads)
+        assert parts[0].start == 0 and parts[-1].stop == n
+        assert all(a.stop == b.start for a, b in zip(parts[:-1], parts[1:], strict=True))
+        assert max(p.stop - p.start for p in parts) <= batch
+        if threads > 1 and n >= threads * MIN_BLOCK:
+            assert len(parts) % threads == 0
+        else:
+            assert len(parts) == max(1, -(-n // batch))
+    assert len(blocks(30000, 8192, 2)) == 4 and len(blocks(30000, 4096, 2)) == 8
+    assert len(blocks(5000, 8192, 2)) == 2 and len(blocks(2047, 8192, 2)) == 1

@@ -461,3 +461,21 @@ def test_screened_is_the_network_where_something_can_move_and_the_identity_elsew
         neural.screened(f, h, row=7)
     everything = neural.screened(f[:0], h[:0])  # no points at all
     assert everything.f.shape == (0, N_SLOTS)
+
+
+def test_neural_batches_on_two_threads_agree_with_one_call_on_one(neural, monkeypatch):
+    """The committed operator cut into batches on two threads: one call's answer, bit for bit (with
+    one intra-op thread per session a point's answer does not depend on its batch)."""
+    from service.pipeline import untangle_onnx
+
+    rng = np.random.default_rng(11)
+    f = rng.normal(0, 0.01, (6000, 4))
+    h = rng.normal(0, 0.05, (6000, 4))
+    one = untangle_onnx.NeuralUntangler(threads=1)
+    two = untangle_onnx.NeuralUntangler(threads=2)
+    monkeypatch.setattr(untangle_onnx, "BATCH", 1500)
+    for kwargs in ({"jacobian": False}, {"jacobian": True}, {"jacobian": True, "row": 2}):
+        a, b = two(f, h, **kwargs), one(f, h, **kwargs)
+        np.testing.assert_array_equal(a.f, b.f)
+        if b.jacobian is not None:
+            np.testing.assert_array_equal(a.jacobian, b.jacobian)
