@@ -18,6 +18,10 @@ For the outfits of ``benchmarks.latency`` (every body shape new, no quality meas
   Python work were free and both cores were always busy: what doing the same work faster could
   reach at best, without doing less of it.
 
+Then, on 2 threads, how many cores the request keeps busy (process CPU time over wall time) up to the
+body map and in the world-space stages (the squeeze and the repair, ``untangle_world``): where the
+second core idles.
+
 The timers wrap ``onnxruntime.InferenceSession.run``, the KD-tree class that ``service.geometry.closest``
 builds its trees with, and each kernel where its caller looks it up (installed before the models
 load); they add ~1 us a call.
@@ -114,17 +118,46 @@ def _instrumented(threads: int):
         ) = saved  # fmt: skip
 
 
+WORLD = {"wall": 0.0, "cpu": 0.0}  # the world-space stages (squeeze and repair) of the last request
+
+
+@contextmanager
+def _world_clock():
+    """Wall and process CPU time of ``untangle_world`` (the squeeze and the repair) into ``WORLD``."""
+    untangle = service.pipeline.outfit.untangle_world
+
+    def timed(*args, **kwargs):
+        t0, c0 = time.perf_counter(), time.process_time()
+        try:
+            return untangle(*args, **kwargs)
+        finally:
+            WORLD["wall"] += time.perf_counter() - t0
+            WORLD["cpu"] += time.process_time() - c0
+
+    service.pipeline.outfit.untangle_world = timed
+    try:
+        yield
+    finally:
+        service.pipeline.outfit.untangle_world = untangle
+
+
 def measure(models: OutfitModels, ids: list[str], betas: np.ndarray, repair: bool = True) -> dict[str, float]:
-    """p50 (ms) over ``betas`` of the total and of the time inside onnxruntime and the KD-tree."""
-    rows = []
+    """p50 (ms) over ``betas`` of the total and of the time inside onnxruntime and the KD-tree; and the
+    cores kept busy (process CPU time over wall time, summed over the requests) before the world-space
+    stages and in them."""
+    rows, busy = [], np.zeros(4)  # (wall, cpu) before untangle_world, (wall, cpu) in it
     for beta in betas:
-        for key in SPENT:
-            SPENT[key] = 0.0
-        t0 = time.perf_counter()
-        make_outfit(models, ids, beta, measure=False, repair=repair)
-        rows.append((time.perf_counter() - t0, SPENT["onnxruntime"], SPENT["kdtree"], SPENT["numba"]))
+        for key in (*SPENT, *WORLD):
+            (SPENT if key in SPENT else WORLD)[key] = 0.0
+        t0, c0 = time.perf_counter(), time.process_time()
+        with _world_clock():
+            make_outfit(models, ids, beta, measure=False, repair=repair)
+        wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+        busy += (wall - WORLD["wall"], cpu - WORLD["cpu"], WORLD["wall"], WORLD["cpu"])
+        rows.append((wall, SPENT["onnxruntime"], SPENT["kdtree"], SPENT["numba"]))
     total, onnx, kd, jit = np.median(np.array(rows) * 1e3, axis=0)
-    return {"total": total, "onnxruntime": onnx, "kdtree": kd, "numba": jit}
+    cores = (busy[1] / busy[0], busy[3] / busy[2] if busy[2] else float("nan"))
+    return {"total": total, "onnxruntime": onnx, "kdtree": kd, "numba": jit, "cores": cores}
 
 
 def main(argv=None) -> None:
@@ -155,6 +188,12 @@ def main(argv=None) -> None:
             f"{one['onnxruntime']:.0f} | {one['kdtree']:.0f} | {one['numba']:.0f} | "
             f"{one['total'] - compiled:.0f} | {compiled / 2:.0f} |"
         )
+    print("\n## Cores kept busy on 2 threads (process CPU time / wall time, all requests)")
+    print("| outfit | body to body map | squeeze + repair |")
+    print("|---|---:|---:|")
+    for ids in OUTFITS:
+        before, world = results[2][ids]["cores"]
+        print(f"| body + {' + '.join(ids)} | {before:.2f} | {world:.2f} |")
 
 
 if __name__ == "__main__":

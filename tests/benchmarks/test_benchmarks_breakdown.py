@@ -36,3 +36,28 @@ def test_timers_count_the_kernels_and_are_removed_after():
              service.geometry.closest.QUERY_THREADS, service.pipeline.outfit.FIT_THREADS,
              service.geometry.closest.select)  # fmt: skip
     assert after == before
+
+
+def test_the_world_clock_times_untangle_world_and_is_removed_after():
+    import time
+
+    from benchmarks.breakdown import WORLD, _world_clock
+
+    before = service.pipeline.outfit.untangle_world
+    WORLD["wall"] = WORLD["cpu"] = 0.0
+
+    def busy(*args, **kwargs):  # a stand-in that spins one core for 50 ms
+        end = time.perf_counter() + 0.05
+        while time.perf_counter() < end:
+            pass
+        return args
+
+    service.pipeline.outfit.untangle_world = busy
+    try:
+        with _world_clock():
+            assert service.pipeline.outfit.untangle_world(1, 2) == (1, 2)
+        assert service.pipeline.outfit.untangle_world is busy
+    finally:
+        service.pipeline.outfit.untangle_world = before
+    assert 0.05 <= WORLD["wall"] < 0.5
+    assert 0.5 < WORLD["cpu"] / WORLD["wall"] < 1.2  # one core busy
