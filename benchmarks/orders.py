@@ -5,6 +5,7 @@ Run (a minute or two each)::
     python -m benchmarks.orders [--outfits 24] [--seed 7]      # random stacks of 1-4, one per body
     python -m benchmarks.orders --pairs [--bodies 1]           # every ordered pair, held-out + corners
     python -m benchmarks.orders --stacks 100 [--seed 7]        # random stacks of 3-4, held-out + corners
+    python -m benchmarks.orders --junctions                    # armholes and crotches, template vs drape
 
 The default: ``--outfits`` outfits of 1-4 catalog garments in random order (many of them orders cloth
 cannot take: shorts over a skirt, a T-shirt over a jacket) on held-out body shapes (a Sobol seed no
@@ -23,6 +24,12 @@ quality measures. Per outfit:
 - the time.
 Then a summary: outfits, clean ones (0 crossing pairs and at most ``PENETRATION_LIMIT`` % penetrating),
 the worst of each measure and the p50 time.
+
+``--junctions`` (seconds, no outfits): for every ordered pair, how far the inner garment's junction (an
+armhole, a crotch) hangs below the outer one's (``service.pipeline.layering.junction_run``), on the
+catalog's rest meshes (what the layering rule reads) and on the garments' drapes on the mean body (the
+explicit models at the default shape, in canonical space): a drape's armhole can hang lower than its
+template's.
 """
 
 from __future__ import annotations
@@ -33,6 +40,7 @@ import itertools
 import numpy as np
 
 from benchmarks.imported import corners
+from service.pipeline.layering import STEP
 from service.pipeline.outfit import OutfitModels, make_outfit
 from service.pipeline.strain import RestShape, green_strain_norms
 from training.drape.dataset import sample_betas
@@ -137,6 +145,32 @@ def stacks(models: OutfitModels, args) -> None:
     _table(f"{args.stacks} random stacks of 3-4 garments (the first 4 on the box's corners)", runs)
 
 
+def junctions(models: OutfitModels) -> None:
+    from service.pipeline.body import DEFAULT_BETA
+    from service.pipeline.layering import GarmentProfile, junction_run
+
+    rule = models.layering_rule()
+    beta = np.asarray(DEFAULT_BETA, dtype=np.float64)
+    drape = {
+        g: GarmentProfile.build(g, models.clear_of_body(models.explicit[g].canonical(beta)), garment.faces,
+                                rule.body)
+        for g, garment in models.catalog.items()
+    }  # fmt: skip
+    print("## Junctions: how far the inner garment's armhole or crotch hangs below the outer one's (cm)")
+    print("| inner < outer | parts | on the rest meshes | on the mean body's drapes | refused |")
+    print("|---|---|---:|---:|---|")
+    for a, b in itertools.permutations(sorted(models.catalog), 2):
+        rest = junction_run(rule.profile(models.catalog[a]), rule.profile(models.catalog[b]), rule.body)
+        draped = junction_run(drape[a], drape[b], rule.body)
+        if rest is None and draped is None:
+            continue
+        k, parts = (rest or draped)[1:]
+        kinds = " + ".join(sorted({rule.body.names[k][i] for i in parts}))
+        cm = [f"{100 * r[0] * STEP:.0f}" if r else "0" for r in (rest, draped)]
+        refused = "yes" if models.refusals([a, b]) else "no"
+        print(f"| {a} < {b} | {kinds} | {cm[0]} | {cm[1]} | {refused} |")
+
+
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
@@ -146,13 +180,16 @@ def main(argv=None) -> None:
     parser.add_argument("--pairs", action="store_true", help="every ordered pair (issue 21)")
     parser.add_argument("--bodies", type=int, default=1, help="held-out bodies for --pairs (plus 2 corners)")
     parser.add_argument("--stacks", type=int, default=0, help="random stacks of 3-4 garments (issue 21)")
+    parser.add_argument("--junctions", action="store_true", help="armhole and crotch depths, no outfits")
     args = parser.parse_args(argv)
     models = OutfitModels.load()
+    if args.junctions:
+        junctions(models)
     if args.pairs:
         pairs(models, args)
     if args.stacks:
         stacks(models, args)
-    if not (args.pairs or args.stacks):
+    if not (args.pairs or args.stacks or args.junctions):
         random_orders(models, args)
 
 

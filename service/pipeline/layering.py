@@ -117,17 +117,26 @@ def _held_apart(inner: list[Loop], outer: list[Loop]) -> frozenset[int] | None:
     return None
 
 
-def topology_refusal(inner: GarmentProfile, outer: GarmentProfile, body: BodySlices) -> Refusal | None:
-    """Rule 1: the longest run of levels where ``outer`` holds apart parts ``inner`` wraps together."""
+def junction_run(inner: GarmentProfile, outer: GarmentProfile, body: BodySlices):
+    """The longest run of levels where ``outer`` holds apart parts ``inner`` wraps together: (its
+    length in levels, the level at its top and the parts there), or None. A looser top's armhole that
+    hangs below a fitted one's, a crotch below another's: the height the outer garment's junction
+    would have to come down (or the inner one's go up)."""
     run, best, where = 0, 0, None
     for k in range(len(body.levels)):
         parts = _held_apart(inner.loops[k], outer.loops[k])
         run = run + 1 if parts is not None else 0
         if run > best:
             best, where = run, (k, parts)
-    if where is None:
+    return None if where is None else (best, *where)
+
+
+def topology_refusal(inner: GarmentProfile, outer: GarmentProfile, body: BodySlices) -> Refusal | None:
+    """Rule 1: the longest run of levels where ``outer`` holds apart parts ``inner`` wraps together."""
+    found = junction_run(inner, outer, body)
+    if found is None:
         return None
-    k, parts = where
+    best, k, parts = found
     kinds = {body.names[k][i] for i in parts}
     if best * STEP <= min(JOIN_TOLERANCE[kind] for kind in kinds):
         return None

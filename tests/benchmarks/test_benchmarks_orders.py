@@ -37,3 +37,16 @@ def test_a_measured_outfit_reports_what_the_summary_needs(models, capsys):
     assert any("refused: skirt wraps both legs" in line for line in lines)
     summary = [c.strip() for c in lines[-1].strip("|").split("|")]
     assert summary[:5] == ["3", "2", "1", str(int(m["clean"])), "3"]
+
+
+def test_the_junction_table_lists_the_catalog_pairs_with_a_run(models, capsys):
+    from benchmarks.orders import junctions
+
+    junctions(models)
+    rows = [line for line in capsys.readouterr().out.splitlines() if line.startswith("| ") and " < " in line]
+    cells = {r.split("|")[1].strip(): [c.strip() for c in r.strip("|").split("|")] for r in rows}
+    assert cells["skirt < pants"][4] == "yes" and int(cells["skirt < pants"][2]) >= 30
+    assert cells["jacket < tshirt"][1] == "arm + torso" and cells["jacket < tshirt"][4] == "no"
+    # the drape's armhole hangs lower than the template's
+    assert int(cells["jacket < tshirt"][3]) > int(cells["jacket < tshirt"][2]) > 0
+    assert "tshirt < jacket" not in cells  # the usual order holds nothing apart

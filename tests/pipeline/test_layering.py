@@ -77,6 +77,19 @@ def test_pants_cannot_go_over_a_long_skirt_but_a_skirt_goes_over_pants(legs_body
     assert layering.refusals(profiles, ["mini", "pants"], legs_body) == []
 
 
+def test_the_junction_run_is_how_far_a_crotch_hangs_below_the_other_one(legs_body):
+    pants = profile(
+        "pants", legs_body, tube(0.18, 0.8, 1.05), tube(0.08, 0.1, 0.8, -0.09), tube(0.08, 0.1, 0.8, 0.09)
+    )
+    mini = profile("mini", legs_body, tube(0.22, 0.77, 1.05))  # 3 cm below the crotch
+    skirt = profile("skirt", legs_body, tube(0.22, 0.4, 1.05))
+    run, top, parts = layering.junction_run(mini, pants, legs_body)
+    assert run == 3 and 0.77 < legs_body.levels[top] < 0.8  # three 1 cm levels, just under the crotch
+    assert {legs_body.names[top][i] for i in parts} == {"leg"} and len(parts) == 2
+    assert layering.junction_run(skirt, pants, legs_body)[0] == 40
+    assert layering.junction_run(pants, skirt, legs_body) is None  # a skirt over pants holds nothing apart
+
+
 def test_an_outer_garment_too_small_to_stretch_over_the_body_is_refused(legs_body):
     leg = 2 * 32 * 0.07 * np.sin(np.pi / 32)  # the body's leg perimeter
     tight = 0.07 * 0.97 / (1 + layering.STRETCH_LIMIT)  # stretched by the limit: 3 % short of the leg
