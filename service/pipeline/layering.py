@@ -213,6 +213,16 @@ class LayeringRule:
             )
         return self._profiles[garment.id]
 
+    def holds_legs_apart(self, garment) -> bool:
+        """Whether ``garment`` goes around each leg separately somewhere (pants, shorts; not a skirt):
+        a top tucked into it can hang below its crotch (``service.pipeline.squeeze.asks_segment_test``)."""
+        body = self.body
+        return any(
+            len(loop.parts) == 1 and body.names[k][next(iter(loop.parts))] == "leg"
+            for k, loops in enumerate(self.profile(garment).loops)
+            for loop in loops
+        )
+
     def warm(self, garments) -> None:
         for g in garments:
             self.profile(g)

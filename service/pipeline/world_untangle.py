@@ -15,7 +15,7 @@ import numpy as np
 
 from service.geometry.closest import Closest, ClosestPoint, KeptQueries
 from service.pipeline.repair import REACH, Inner, RepairSettings, repair_layer
-from service.pipeline.squeeze import Outer, SqueezeSettings, squeeze_layer
+from service.pipeline.squeeze import Outer, SqueezeSettings, asks_segment_test, squeeze_layer
 
 DEFAULT_SQUEEZE = SqueezeSettings()
 PASSES = 3
@@ -79,7 +79,8 @@ def _squeeze(models, layer_ids, beta, fitted, world, faces, body: ClosestPoint) 
             if i not in meshes:
                 meshes[i] = ClosestPoint.build(out[i], faces[i])
             inner_g, outer_g = models.catalog[layer_ids[j + 1]], models.catalog[layer_ids[i + 1]]
-            looser = inner_g.category == outer_g.category and inner_g.layer_rank >= outer_g.layer_rank
+            legs = models.layering_rule().holds_legs_apart(outer_g)
+            looser = asks_segment_test(inner_g, outer_g, legs)
             outer.append(Outer(meshes[i], near, h < 0, looser_under=looser))
         if outer:
             floor = (j + 1) * DEFAULT_SQUEEZE.margin  # room for the garments under this one

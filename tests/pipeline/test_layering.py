@@ -114,6 +114,11 @@ def catalog_rule():
     return LayeringRule(body.vertices(np.asarray(DEFAULT_BETA)), body.faces), dict(load_catalog())
 
 
+def test_pants_and_shorts_hold_the_legs_apart_a_skirt_and_the_tops_do_not(catalog_rule):
+    rule, catalog = catalog_rule
+    assert {g for g, garment in catalog.items() if rule.holds_legs_apart(garment)} == {"pants", "shorts"}
+
+
 def test_the_catalog_refuses_only_a_skirt_under_legged_bottoms(catalog_rule):
     rule, catalog = catalog_rule
     refused = {

@@ -98,3 +98,25 @@ def test_cloth_hanging_far_outside_is_pulled_in_when_the_outer_layer_lies_betwee
     far = v[:, 0] > 0.1
     np.testing.assert_array_equal(r.vertices[far], v[far])
     assert np.all(r.vertices[v[:, 0] < -0.05, 2] <= 0.01 - 0.9 * settings.margin)
+
+
+def test_the_segment_test_is_asked_for_looser_tops_and_for_tops_tucked_into_legged_bottoms():
+    from service.pipeline.catalog import load_catalog
+    from service.pipeline.squeeze import asks_segment_test
+
+    catalog = dict(load_catalog())
+    legged = {"pants", "shorts"}  # what LayeringRule.holds_legs_apart says of the catalog (test_layering)
+    asked = {
+        (a, b) for a in catalog for b in catalog
+        if a != b and asks_segment_test(catalog[a], catalog[b], b in legged)
+    }  # fmt: skip
+    assert {("jacket", "tshirt"), ("long_sleeve", "tank_top"), ("tshirt", "tank_top")} <= asked  # looser tops
+    assert {("tshirt", "pants"), ("long_sleeve", "shorts"), ("jacket", "pants")} <= asked  # tucked in
+    assert {("shorts", "pants"), ("pants", "skirt")} <= asked  # a bottom in a bottom: the ranks tie
+    # Not the usual orders (the benchmarks' outfits), not a top in a skirt, not a tank top in pants
+    # (its rank is below theirs: its hem stays above the crotch).
+    not_asked = {
+        ("tshirt", "jacket"), ("pants", "tshirt"), ("tank_top", "tshirt"), ("long_sleeve", "jacket"),
+        ("shorts", "tank_top"), ("jacket", "skirt"), ("tshirt", "skirt"), ("tank_top", "pants"),
+    }  # fmt: skip
+    assert not not_asked & asked
