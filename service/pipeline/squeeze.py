@@ -60,7 +60,7 @@ class Outer:
     crossing pairs in four tops on a short, heavy body."""
 
 
-def asks_segment_test(inner, outer, outer_holds_legs_apart: bool) -> bool:
+def asks_segment_test(inner, outer, holds_legs_apart) -> bool:
     """Whether garment ``inner`` under ``outer`` (catalog ``Garment``s) gets the segment test: worn
     against the catalog's usual order (its ``layer_rank`` not below the outer one's), and either of the
     same category (a looser top under a tighter one, a bottom in another) or a top tucked into a bottom
@@ -68,11 +68,14 @@ def asks_segment_test(inner, outer, outer_holds_legs_apart: bool) -> bool:
     hem can hang below on a short body, as a looser top's armhole does below a fitted one's armpit.
     Not a top in a skirt: the test walked a jacket's hem inside a skirt on the shortest man into 12
     crossing pairs where it had none. ``benchmarks.orders --pairs`` with tucked tops asked too: the long
-    sleeve in pants on the shortest, lightest man 105 -> 6 crossing pairs, in shorts 24 -> 0."""
+    sleeve in pants on the shortest, lightest man 105 -> 6 crossing pairs, in shorts 24 -> 0.
+    ``holds_legs_apart(garment) -> bool`` is asked only of a bottom a top is tucked into: usual orders
+    never read the garments' slices."""
     if inner.layer_rank < outer.layer_rank:
         return False
-    tucked = inner.category == "top" and outer.category == "bottom" and outer_holds_legs_apart
-    return inner.category == outer.category or tucked
+    if inner.category == outer.category:
+        return True
+    return inner.category == "top" and outer.category == "bottom" and holds_legs_apart(outer)
 
 
 @dataclass(frozen=True)

@@ -79,8 +79,7 @@ def _squeeze(models, layer_ids, beta, fitted, world, faces, body: ClosestPoint) 
             if i not in meshes:
                 meshes[i] = ClosestPoint.build(out[i], faces[i])
             inner_g, outer_g = models.catalog[layer_ids[j + 1]], models.catalog[layer_ids[i + 1]]
-            legs = models.layering_rule().holds_legs_apart(outer_g)
-            looser = asks_segment_test(inner_g, outer_g, legs)
+            looser = asks_segment_test(inner_g, outer_g, models.layering_rule().holds_legs_apart)
             outer.append(Outer(meshes[i], near, h < 0, looser_under=looser))
         if outer:
             floor = (j + 1) * DEFAULT_SQUEEZE.margin  # room for the garments under this one
