@@ -147,8 +147,8 @@ def measure(models: OutfitModels, ids: list[str], betas: np.ndarray, repair: boo
     stages and in them."""
     rows, busy = [], np.zeros(4)  # (wall, cpu) before untangle_world, (wall, cpu) in it
     for beta in betas:
-        for key in (*SPENT, *WORLD):
-            (SPENT if key in SPENT else WORLD)[key] = 0.0
+        SPENT.update(dict.fromkeys(SPENT, 0.0))
+        WORLD.update(dict.fromkeys(WORLD, 0.0))
         t0, c0 = time.perf_counter(), time.process_time()
         with _world_clock():
             make_outfit(models, ids, beta, measure=False, repair=repair)
