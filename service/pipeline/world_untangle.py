@@ -37,20 +37,24 @@ def _field_at(models, layer_ids, beta, fitted, k: int, i: int):
     return v.f, v.h
 
 
-def untangle_world(models, layer_ids, beta, body, explicit, fitted, world, faces, settings: RepairSettings):
+def untangle_world(models, layer_ids, beta, body, explicit, fitted, world, faces, settings: RepairSettings,
+                   lowered: list[float] | None = None):
     """The squeeze then the repair of the fitted world meshes; where faults are left, again from the
     repaired meshes, up to ``PASSES`` times (the repair lifted an outer layer over an inner one that the
     squeeze can now press under it: four tops on a heavy body, 123 crossing pairs in the armpits after
     the first pass, 0 after the second). Returns the meshes with the fewest crossings, then vertices
     inside, and their ``RepairResult``s. ``fitted`` is (fitted canonical vertices, the fits' field
-    values or None) per garment (``_field_at``)."""
+    values or None) per garment (``_field_at``). ``lowered``: per garment, how far (m) its explicit
+    mesh was let down from the one its fields were learned on (``service.pipeline.junctions``), which
+    widens where the garments over it look for it."""
+    lowered = lowered or [0.0] * len(world)
     best = None
     start = world
     body_mesh = ClosestPoint.build(body, models.body.faces)
     for _ in range(PASSES):
         squeezed = _squeeze(models, layer_ids, beta, fitted, start, faces, body_mesh)
         meshes = (explicit, fitted, world, squeezed, faces)
-        out, results = _repair(models, layer_ids, beta, body_mesh, *meshes, settings)
+        out, results = _repair(models, layer_ids, beta, body_mesh, *meshes, settings, lowered)
         # Crossings first: a vertex left inside an inner layer is within the quality bound (0.1 %)
         # long before a crossing pair is.
         faults = (sum(r.crossing_pairs for r in results), sum(r.inside for r in results))
@@ -90,7 +94,8 @@ def _squeeze(models, layer_ids, beta, fitted, world, faces, body: ClosestPoint) 
     return out
 
 
-def _repair(models, layer_ids, beta, body: ClosestPoint, explicit, fitted, fit_world, world, faces, settings):
+def _repair(models, layer_ids, beta, body: ClosestPoint, explicit, fitted, fit_world, world, faces, settings,
+            lowered):
     """Repaired world meshes and their ``RepairResult``s, each layer against the final inner ones.
 
     Which vertices can be near an inner layer, and where it covers them, comes from the fields at the
@@ -127,6 +132,7 @@ def _repair(models, layer_ids, beta, body: ClosestPoint, explicit, fitted, fit_w
         # repair in world space.
         fit_move = float(np.linalg.norm(fitted[0][i] - explicit[i], axis=1).max())
         moved = 1.2 * fit_move + float(np.linalg.norm(out[-1] - fit_world[i], axis=1).max())
+        moved += 1.2 * lowered[i]  # its fields are of the mesh before it was let down
         inner.append((ClosestPoint.build(out[-1], f), False, moved))
     return out, results
 

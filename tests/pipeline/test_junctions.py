@@ -1,0 +1,50 @@
+"""``service.pipeline.junctions``: where the outer garment comes down, by how much, and where not, on
+the cylinder bodies of ``test_layering``; and the catalog's pairs that get a lowering."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from service.pipeline import junctions
+from service.pipeline.layering import STEP, junction_run
+from tests.pipeline import test_layering
+from tests.pipeline.test_layering import closed, profile, tube
+
+legs_body = test_layering.legs_body  # the fixture: torso over two legs
+
+
+def test_saddles_lie_between_the_torso_and_each_arm_or_between_the_legs():
+    centres = np.array([[0.0, 0.0], [0.3, 0.1], [-0.3, 0.1]])
+    arms = junctions.saddles(frozenset({0, 1, 2}), centres, ["torso", "arm", "arm"])
+    np.testing.assert_allclose(arms, [[0.15, 0.05], [-0.15, 0.05]])
+    legs = junctions.saddles(frozenset({0, 1}), centres[1:], ["leg", "leg"])
+    np.testing.assert_allclose(legs, [[0.0, 0.1]])
+
+
+def test_the_outer_crotch_comes_down_below_the_inner_one_and_nothing_else_moves(legs_body):
+    parts = (tube(0.18, 0.8, 1.05), tube(0.08, 0.1, 0.8, -0.09), tube(0.08, 0.1, 0.8, 0.09))
+    pants_v, _ = closed(*parts)
+    pants = profile("pants", legs_body, *parts)
+    mini = profile("mini", legs_body, tube(0.22, 0.77, 1.05))  # its hem 3 cm below the crotch
+    run = junction_run(mini, pants, legs_body)
+    drop = junctions.lowering(mini, pants, legs_body, pants_v)
+    assert drop.shape == pants_v.shape and np.all(drop[:, :2] == 0) and np.all(drop[:, 2] <= 0)
+    assert drop[:, 2].max() == 0 and -drop[:, 2].min() == pytest.approx(run[0] * STEP + junctions.EXTRA)
+    saddle = pants_v[np.argmin(drop[:, 2])]
+    r = np.linalg.norm(pants_v - saddle, axis=1)
+    radius = max(junctions.RADIUS * (run[0] * STEP + junctions.EXTRA), junctions.MIN_RADIUS)
+    moved = drop[:, 2] < 0
+    assert np.all(r[moved] < radius)  # the bump's reach
+    assert np.all(pants_v[moved, 2] < saddle[2] + junctions.GATE)  # the waistband above stays
+    assert abs(saddle[0]) < 0.02  # between the legs
+    # the other order, and an inner garment whose junction is no lower: nothing to let down
+    assert junctions.lowering(pants, mini, legs_body, closed(tube(0.22, 0.77, 1.05))[0]) is None
+    assert junctions.lowering(pants, pants, legs_body, pants_v) is None
+
+
+def test_drops_for_several_inner_garments_take_the_deepest():
+    a, b = np.zeros((3, 3)), np.zeros((3, 3))
+    a[:, 2], b[:, 2] = [-0.1, 0.0, -0.02], [-0.05, -0.03, 0.0]
+    np.testing.assert_array_equal(junctions.combined([a, b])[:, 2], [-0.1, -0.03, -0.02])
+    assert junctions.combined([]) is None
