@@ -4,7 +4,8 @@ Writes ``docs/images/layerings.png``: each layering (inner < outer) after untang
 on a held-out body (a Sobol seed no training used) and on the box's tallest, heaviest corner (no
 training shape either), titled with its crossing pairs, penetration and the worst Green strain p99
 against each garment's explicit mesh (``benchmarks.orders.measured``'s measure). A tight garment over a
-looser one (the tank top over the T-shirt, the T-shirt over the jacket) presses the inner one in.
+looser one (the tank top over the T-shirt) presses the inner one in; one whose armholes are higher than
+the inner one's (the T-shirt over the jacket) is let down around them (``service.pipeline.junctions``).
 """
 
 from __future__ import annotations
