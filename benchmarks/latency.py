@@ -77,6 +77,7 @@ def main(argv=None) -> None:
     from service.pipeline.outfit import OutfitModels, make_outfit
 
     models = OutfitModels.load(threads=args.threads)
+    models.warm()  # what the service makes at start (service.pipeline.tryon.ModelEngine.load)
     make_outfit(models, ["shorts"], betas[0], measure=False)  # warm-up: sessions, caches, allocator
     _header(f"## Latency, one request at a time, {args.bodies} new body shapes per outfit (ms)")
     for ids in OUTFITS:

@@ -19,6 +19,8 @@ def main() -> None:
     from service.pipeline.outfit import OutfitModels, make_outfit
 
     models = OutfitModels.load(threads=int(sys.argv[1]) if len(sys.argv) > 1 else 2)
+    if hasattr(models, "warm"):  # as the service starts (trees before the junctions have none)
+        models.warm()
     print(json.dumps({"ready": True}), flush=True)
     for line in sys.stdin:
         request = json.loads(line)

@@ -88,6 +88,14 @@ class OutfitModels:
                 self._lowerings[key] = junctions.lowering(inner, outer, self.layering_rule().body, drape)
             return self._lowerings[key]
 
+    def warm(self) -> None:
+        """Make up front what requests would make on first use: the layering rule's profiles and every
+        garment's drape profile (~70 ms a garment); a pair's lowering is then ~1 ms, made when asked."""
+        self.layering_rule().warm(self.catalog.values())
+        with self._lock:
+            for garment_id in self.catalog:
+                self._drape_profile(garment_id)
+
     def _drape_profile(self, garment_id: str) -> tuple[np.ndarray, GarmentProfile]:
         """(the garment's drape on the mean body (V, 3), canonical; its slices' profile), kept."""
         if garment_id not in self._drapes:
