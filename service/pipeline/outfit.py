@@ -79,8 +79,8 @@ class OutfitModels:
     def lowering(self, inner_id: str, outer_id: str) -> np.ndarray | None:
         """The canonical displacement (V, 3) that lets ``outer_id``'s junctions down below
         ``inner_id``'s (``service.pipeline.junctions``), or None; made from the two drapes on the mean
-        body on first use and kept (every body shape gets the same): ~60 ms a garment, once, and a few
-        ms a pair."""
+        body (``warm`` makes their profiles at start) on first use, ~1 ms, and kept: every body shape
+        gets the same."""
         key = (inner_id, outer_id)
         with self._lock:  # two requests' threads may ask for the same pair at once
             if key not in self._lowerings:

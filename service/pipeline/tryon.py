@@ -191,7 +191,7 @@ class ModelEngine:
             manifests = "".join(model_version(d) for d in imported)
             version = hashlib.sha256((version + manifests).encode()).hexdigest()[:12]
         models = OutfitModels.load(models_dir, threads=threads, imported=imported)
-        models.warm()  # ~2.5 s here rather than on first requests (layering profiles, junction drops)
+        models.warm()  # ~1 s here rather than on first requests (layering and drape profiles)
         return cls(models, version)
 
     def garment_ids(self) -> list[str]:

@@ -1,5 +1,5 @@
 """``service.pipeline.junctions``: where the outer garment comes down, by how much, and where not, on
-the cylinder bodies of ``test_layering``; and the catalog's pairs that get a lowering."""
+the cylinder bodies of ``test_layering`` (the catalog's pairs: ``test_outfit``)."""
 
 from __future__ import annotations
 
