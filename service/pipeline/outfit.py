@@ -90,7 +90,7 @@ class OutfitModels:
 
     def warm(self) -> None:
         """Make up front what requests would make on first use: the layering rule's profiles and every
-        garment's drape profile (~70 ms a garment); a pair's lowering is then ~1 ms, made when asked."""
+        garment's drape profile (~60 ms a garment); a pair's lowering is then ~1 ms, made when asked."""
         self.layering_rule().warm(self.catalog.values())
         with self._lock:
             for garment_id in self.catalog:
