@@ -285,6 +285,7 @@ def train(
     t0 = time.perf_counter()
     running = 0.0
     end = config.steps if stop_at is None else min(stop_at, config.steps)
+    saved = before  # the seconds the checkpoint holds
     for step in range(start, end):
         progress = step / max(config.steps - 1, 1)
         lr = config.lr * (config.lr_final + (1 - config.lr_final) * 0.5 * (1 + np.cos(np.pi * progress)))
@@ -310,10 +311,14 @@ def train(
         if checkpoint is not None and (done % config.checkpoint_every == 0 or done == end):
             checkpoint.parent.mkdir(parents=True, exist_ok=True)
             state = {"config": asdict(config), "net": net.state_dict(), "opt": opt.state_dict()}
-            state.update(step=done, seconds=before + time.perf_counter() - t0)
+            saved = before + time.perf_counter() - t0
+            state.update(step=done, seconds=saved)
             state["torch_threads"] = torch.get_num_threads()
             torch.save(state, checkpoint)
-    return TrainResult(net, before + time.perf_counter() - t0, torch.get_num_threads())
+    # With a checkpoint, the seconds it holds (the export reads them there), not counting its own
+    # save, so the two records of a run agree.
+    seconds = saved if checkpoint is not None else before + time.perf_counter() - t0
+    return TrainResult(net, seconds, torch.get_num_threads())
 
 
 def load_trained(checkpoint: Path) -> TrainResult:

@@ -101,7 +101,10 @@ def _repair(models, layer_ids, beta, body: ClosestPoint, explicit, fitted, fit_w
     Which vertices can be near an inner layer, and where it covers them, comes from the fields at the
     layer's fitted canonical vertices (``_field_at``: those the fit left, values only). The
     fields are those of the explicit meshes: an inner garment that its fit and repair moved by up to
-    s is looked for within ``REACH`` + s."""
+    s is looked for within ``REACH`` + s. The fields were read where the fit left a vertex: one the
+    squeeze (or an earlier pass) moved by d since is looked for within d more, so that the count of
+    crossings left is the exact one on the returned meshes (a loose sleeve walked 5 cm to its anchor
+    can end inside the arm)."""
     inner = [(body, True, 0.0)]
     out, results = [], []
     # The body never moves, and every layer's first pushes ask it about the layer's vertices where
@@ -109,12 +112,15 @@ def _repair(models, layer_ids, beta, body: ClosestPoint, explicit, fitted, fit_w
     # cores (a layer's own batch is often below a block); the same answers, kept for each layer.
     masks = []
     for i in range(len(world)):
-        f_body = _field_at(models, layer_ids, beta, fitted, 0, i)[0]
         # The body's distance is exact (canonical, a grid): only vertices it puts within
-        # max_margin + BODY_QUERY_PAD can be within a margin of the body in world space.
+        # max_margin + BODY_QUERY_PAD can be within a margin of the body in world space, less how far
+        # the squeeze (and an earlier pass) moved them from where the fit left them: a jacket's sleeve
+        # walked 5 cm to its anchor on the arm can be inside the arm.
+        f_body = _field_at(models, layer_ids, beta, fitted, 0, i)[0] - _moved(world[i], fit_world[i])
         masks.append((f_body < REACH, f_body < settings.max_margin + BODY_QUERY_PAD))
     kept_body = _asked_together(body, world, [np.flatnonzero(near & query) for near, query in masks])
     for i, (x, f) in enumerate(zip(world, faces, strict=True)):
+        own = _moved(x, fit_world[i])  # the fields were read where the fit left the vertices
         layers = []
         for k, (mesh, closed, moved) in enumerate(inner):
             if closed:
@@ -122,7 +128,7 @@ def _repair(models, layer_ids, beta, body: ClosestPoint, explicit, fitted, fit_w
                 layers.append(Inner(mesh, True, near, np.ones(len(x), dtype=bool), query, kept_body[i]))
                 continue
             f_k, h_k = _field_at(models, layer_ids, beta, fitted, k, i)
-            near = np.abs(f_k) < REACH + moved
+            near = np.abs(f_k) < REACH + moved + own
             layers.append(Inner(mesh, closed, near, h_k < 0))
         r = repair_layer(x, f, layers, settings)
         out.append(r.vertices if np.all(np.isfinite(r.vertices)) else x)
@@ -135,6 +141,11 @@ def _repair(models, layer_ids, beta, body: ClosestPoint, explicit, fitted, fit_w
         moved += 1.2 * lowered[i]  # its fields are of the mesh before it was let down
         inner.append((ClosestPoint.build(out[-1], f), False, moved))
     return out, results
+
+
+def _moved(x: np.ndarray, x0: np.ndarray) -> np.ndarray:
+    """``(V,)``: how far each vertex of ``x (V, 3)`` is from ``x0 (V, 3)`` (0 where bit-equal)."""
+    return np.linalg.norm(x - x0, axis=1)
 
 
 def _asked_together(

@@ -21,7 +21,8 @@ def test_a_measured_outfit_reports_what_the_summary_needs(models, capsys):
 
     beta = np.array([0.5, 0.4, 0.5])
     m = measured(models, ["tshirt"], beta)
-    assert set(m) == {"pairs", "penetration", "strain_p99", "strain_max", "ms", "clean"}
+    assert set(m) == {"pairs", "reported", "penetration", "strain_p99", "strain_max", "ms", "clean"}
+    assert m["pairs"] == m["reported"]  # the exact count and the report's agree on a single garment
     assert m["clean"] == (m["pairs"] == 0 and m["penetration"] <= PENETRATION_LIMIT)
     # alone on a middle body the fit and the repair move a T-shirt by millimetres: percents of strain
     assert 0 <= m["strain_p99"] <= m["strain_max"] < 0.2
@@ -31,10 +32,11 @@ def test_a_measured_outfit_reports_what_the_summary_needs(models, capsys):
     assert green_strain_norms(x, RestShape.build(x, faces)).max() < 1e-12
     refused = measured(models, ["skirt", "shorts"], beta)
     assert set(refused) == {"refused"} and "shorts cannot be worn over skirt" in refused["refused"]
-    runs = [(["tshirt"], beta, m), (["tshirt"], beta, m | {"pairs": 3, "clean": False})]
+    runs = [(["tshirt"], beta, m), (["tshirt"], beta, m | {"pairs": 3, "reported": 1, "clean": False})]
     _table("probe", runs + [(["skirt", "shorts"], beta, refused)])
     lines = capsys.readouterr().out.strip().splitlines()
     assert any("refused: skirt wraps both legs" in line for line in lines)
+    assert any("| 3 (report: 1) |" in line for line in lines)  # a disagreement is printed, not hidden
     summary = [c.strip() for c in lines[-1].strip("|").split("|")]
     assert summary[:5] == ["3", "2", "1", str(int(m["clean"])), "3"]
 
