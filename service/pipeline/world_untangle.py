@@ -102,25 +102,26 @@ def _repair(models, layer_ids, beta, body: ClosestPoint, explicit, fitted, fit_w
     layer's fitted canonical vertices (``_field_at``: those the fit left, values only). The
     fields are those of the explicit meshes: an inner garment that its fit and repair moved by up to
     s is looked for within ``REACH`` + s. The fields were read where the fit left a vertex: one the
-    squeeze (or an earlier pass) moved by d since is looked for within d more, so that the count of
-    crossings left is the exact one on the returned meshes (a loose sleeve walked 5 cm to its anchor
-    can end inside the arm)."""
+    squeeze (or an earlier pass) moved by d since is looked for within d more, so that the crossings
+    left that the repair counts are never fewer than the returned meshes have (a loose sleeve walked
+    5 cm to its anchor can end inside the arm)."""
     inner = [(body, True, 0.0)]
     out, results = [], []
     # The body never moves, and every layer's first pushes ask it about the layer's vertices where
     # the squeeze left them: those queries go in one batch, which the query's blocks spread over both
     # cores (a layer's own batch is often below a block); the same answers, kept for each layer.
     masks = []
+    # m per vertex: how far the squeeze (and an earlier pass) moved it from where the fit left it.
+    own = [np.linalg.norm(x - x0, axis=1) for x, x0 in zip(world, fit_world, strict=True)]
     for i in range(len(world)):
         # The body's distance is exact (canonical, a grid): only vertices it puts within
         # max_margin + BODY_QUERY_PAD can be within a margin of the body in world space, less how far
-        # the squeeze (and an earlier pass) moved them from where the fit left them: a jacket's sleeve
-        # walked 5 cm to its anchor on the arm can be inside the arm.
-        f_body = _field_at(models, layer_ids, beta, fitted, 0, i)[0] - _moved(world[i], fit_world[i])
+        # they moved since the fit: a jacket's sleeve walked 5 cm to its anchor on the arm can be
+        # inside the arm.
+        f_body = _field_at(models, layer_ids, beta, fitted, 0, i)[0] - own[i]
         masks.append((f_body < REACH, f_body < settings.max_margin + BODY_QUERY_PAD))
     kept_body = _asked_together(body, world, [np.flatnonzero(near & query) for near, query in masks])
     for i, (x, f) in enumerate(zip(world, faces, strict=True)):
-        own = _moved(x, fit_world[i])  # the fields were read where the fit left the vertices
         layers = []
         for k, (mesh, closed, moved) in enumerate(inner):
             if closed:
@@ -128,7 +129,7 @@ def _repair(models, layer_ids, beta, body: ClosestPoint, explicit, fitted, fit_w
                 layers.append(Inner(mesh, True, near, np.ones(len(x), dtype=bool), query, kept_body[i]))
                 continue
             f_k, h_k = _field_at(models, layer_ids, beta, fitted, k, i)
-            near = np.abs(f_k) < REACH + moved + own
+            near = np.abs(f_k) < REACH + moved + own[i]
             layers.append(Inner(mesh, closed, near, h_k < 0))
         r = repair_layer(x, f, layers, settings)
         out.append(r.vertices if np.all(np.isfinite(r.vertices)) else x)
@@ -141,11 +142,6 @@ def _repair(models, layer_ids, beta, body: ClosestPoint, explicit, fitted, fit_w
         moved += 1.2 * lowered[i]  # its fields are of the mesh before it was let down
         inner.append((ClosestPoint.build(out[-1], f), False, moved))
     return out, results
-
-
-def _moved(x: np.ndarray, x0: np.ndarray) -> np.ndarray:
-    """``(V,)``: how far each vertex of ``x (V, 3)`` is from ``x0 (V, 3)`` (0 where bit-equal)."""
-    return np.linalg.norm(x - x0, axis=1)
 
 
 def _asked_together(
