@@ -171,7 +171,7 @@ def test_the_report_counts_every_crossing_left(models):
     # each inner layer. The squeeze walks a loose garment's vertices centimetres towards the body (the
     # jacket under the tank top on the shortest, lightest man): those are tested too, so the report
     # never says fewer than the exact all-pairs count on the returned meshes, and collision-free means
-    # none. It said 0 against 25-168 body/jacket pairs when the repair read the body's distance where
+    # none. It said 0 against 25 body/jacket pairs when the repair read the body's distance where
     # the fit had left the walked vertices.
     from benchmarks.imported import corners
 
