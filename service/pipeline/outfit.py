@@ -81,11 +81,25 @@ class OutfitModels:
         ``inner_id``'s (``service.pipeline.junctions``), or None; made from the two drapes on the mean
         body (``warm`` makes their profiles at start) on first use, ~1 ms, and kept: every body shape
         gets the same."""
+        return self._junction(inner_id, outer_id)[1]
+
+    def raising(self, inner_id: str, outer_id: str) -> junctions.Gathering | None:
+        """How a top tucked into ``outer_id`` is gathered up above its crotch (``junctions.raising``), or
+        None; made and kept as ``lowering``. A top in a bottom is raised, never the bottom let down."""
+        return self._junction(inner_id, outer_id)[0]
+
+    def _junction(self, inner_id: str, outer_id: str):
+        """(the inner garment's raising, the outer garment's lowering) of an ordered pair, kept."""
         key = (inner_id, outer_id)
         with self._lock:  # two requests' threads may ask for the same pair at once
             if key not in self._lowerings:
-                (_, inner), (drape, outer) = (self._drape_profile(g) for g in key)
-                self._lowerings[key] = junctions.lowering(inner, outer, self.layering_rule().body, drape)
+                (inner_drape, inner), (drape, outer) = (self._drape_profile(g) for g in key)
+                body = self.layering_rule().body
+                a, b = self.catalog[inner_id], self.catalog[outer_id]
+                tucked = a.category == "top" and b.category == "bottom"
+                up = junctions.raising(inner, outer, body, inner_drape, a.faces, drape) if tucked else None
+                down = None if up is not None else junctions.lowering(inner, outer, body, drape)
+                self._lowerings[key] = (up, down)
             return self._lowerings[key]
 
     def warm(self) -> None:
@@ -249,13 +263,17 @@ def make_outfit(
     faces = [models.catalog[g].faces for g in garment_ids]
     # An outer garment comes down around an inner one whose armhole or crotch hangs lower: the drop,
     # in canonical space, is the same for every body (service.pipeline.junctions).
+    # A top tucked into a bottom whose crotch is higher than its hem is gathered up above it instead.
     lowered = [0.0] * len(garment_ids)
-    for j, outer in enumerate(garment_ids):
-        drops = [models.lowering(inner, outer) for inner in garment_ids[:j]]
-        drop = junctions.combined([d for d in drops if d is not None])
-        if drop is not None:
-            explicit[j] = models.clear_of_body(explicit[j] + drop)
-            lowered[j] = float(np.abs(drop).max())
+    for j, garment in enumerate(garment_ids):
+        drops = [models.lowering(inner, garment) for inner in garment_ids[:j]]
+        for k in range(j + 1, len(garment_ids)):  # read on this body: the bottom's crotch height
+            gathering = models.raising(garment, garment_ids[k])
+            drops.append(gathering and gathering.shift(explicit[j], explicit[k]))
+        shift = junctions.combined([d for d in drops if d is not None])
+        if shift is not None:
+            explicit[j] = models.clear_of_body(explicit[j] + shift)
+            lowered[j] = float(np.abs(shift).max())
     seconds["explicit"] = time.perf_counter() - t0
     layer_ids = [BODY, *garment_ids]
 

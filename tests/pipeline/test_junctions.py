@@ -48,3 +48,39 @@ def test_drops_for_several_inner_garments_take_the_deepest():
     a[:, 2], b[:, 2] = [-0.1, 0.0, -0.02], [-0.05, -0.03, 0.0]
     np.testing.assert_array_equal(junctions.combined([a, b])[:, 2], [-0.1, -0.03, -0.02])
     assert junctions.combined([]) is None
+
+
+def test_a_top_tucked_into_pants_is_gathered_up_above_their_crotch(legs_body):
+    # A long top (hem 10 cm below the crotch, wrapping both legs) tucked into pants: its hem rises above
+    # the pants' crotch, heights keep their order (gathered, not folded), and what is above the gate or
+    # beside the hem (a sleeve's cuff) stays.
+    pants_parts = (tube(0.18, 0.8, 1.05), tube(0.08, 0.1, 0.8, -0.09), tube(0.08, 0.1, 0.8, 0.09))
+    pants_v, _ = closed(*pants_parts)
+    pants = profile("pants", legs_body, *pants_parts)
+    top_parts = (tube(0.2, 0.7, 1.4, sections=64), tube(0.03, 0.6, 0.9, 0.5))  # body, a hanging cuff
+    top_v, top_f = closed(*top_parts)
+    top = profile("top", legs_body, *top_parts)
+    gathering = junctions.raising(top, pants, legs_body, top_v, top_f, pants_v)
+    crotch = pants_v[gathering.crotch, 2].max()
+    assert abs(crotch - 0.8) < 1e-9  # the legs' tops, where the pants' tubes meet
+    shift = gathering.shift(top_v, pants_v)
+    assert np.all(shift[:, :2] == 0) and np.all(shift[:, 2] >= 0)
+    z = top_v[:, 2] + shift[:, 2]
+    hem = np.linalg.norm(top_v[:, :2], axis=1) < 0.21
+    assert z[hem].min() == pytest.approx(crotch + junctions.EXTRA)
+    order = np.argsort(top_v[hem, 2], kind="stable")
+    assert np.all(np.diff(z[hem][order]) >= -1e-12)
+    top_of_gather = crotch + junctions.EXTRA + max(junctions.GATE, crotch + junctions.EXTRA - 0.7)
+    assert np.all(shift[top_v[:, 2] >= top_of_gather, 2] == 0)
+    assert np.all(shift[~hem, 2] == 0)  # the cuff beside the hips
+    # a top whose hem is above the crotch, and the pants' crotch for a top that hangs no lower: nothing
+    short_parts = (tube(0.2, 0.85, 1.4),)
+    short = profile("short", legs_body, *short_parts)
+    assert junctions.raising(short, pants, legs_body, *closed(*short_parts), pants_v) is None
+    assert gathering.shift(top_v + [0, 0, 0.2], pants_v) is None
+
+
+def test_drops_and_rises_combine_per_vertex():
+    down, up = np.zeros((3, 3)), np.zeros((3, 3))
+    down[:, 2], up[:, 2] = [-0.1, 0.0, -0.02], [0.0, 0.05, 0.03]
+    np.testing.assert_allclose(junctions.combined([down, up])[:, 2], [-0.1, 0.05, 0.01])

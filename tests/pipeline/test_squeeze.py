@@ -100,6 +100,24 @@ def test_cloth_hanging_far_outside_is_pulled_in_when_the_outer_layer_lies_betwee
     assert np.all(r.vertices[v[:, 0] < -0.05, 2] <= 0.01 - 0.9 * settings.margin)
 
 
+def test_the_segment_test_finds_cloth_the_fields_put_far_from_the_outer_layer():
+    # The same hanging sheet, where the outer layer's fields (read at another mesh: the outer garment
+    # before it was let down) put no vertex within reach of it: the segment test is asked anyway, and
+    # the sheet comes in as when every vertex was near.
+    settings = SqueezeSettings()
+    body = ClosestPoint.build(*_sheet(30, 0.5, 0.0))
+    outer = ClosestPoint.build(*_sheet(24, 0.4, 0.01))
+    v, f = _sheet(20, 0.3, 0.08)
+    nowhere = np.zeros(len(v), dtype=bool)
+    anchors = v * [1, 1, 0]
+    r, near = (
+        squeeze_layer(v, f, [Outer(outer, n, nowhere)], body, settings.margin, settings, anchors)
+        for n in (nowhere, ~nowhere)
+    )
+    assert r.outside == 0 and np.array_equal(r.vertices, near.vertices)
+    assert len(intersecting_pairs(r.vertices, f, outer.vertices, outer.faces)) == 0
+
+
 def test_the_segment_test_is_asked_for_looser_tops_and_for_tops_tucked_into_legged_bottoms():
     from service.pipeline.catalog import load_catalog
     from service.pipeline.squeeze import asks_segment_test
