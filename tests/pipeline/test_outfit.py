@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 import trimesh
 
+from benchmarks.orders import PENETRATION_LIMIT
 from service.cli import main
 from service.pipeline.outfit import OutfitModels, make_outfit
 from training.drape.dataset import sample_betas
@@ -158,12 +159,15 @@ def test_an_outer_garment_comes_down_around_a_lower_junction(models, held_out_be
 
 def test_a_long_top_tucked_into_pants_is_gathered_above_their_crotch(models, held_out_beta, monkeypatch):
     # The jacket's hem hangs below the pants' crotch: it is gathered up above it
-    # (service.pipeline.junctions.raising), the pants keep their crotch, and the pair comes out clean;
-    # without the gathering the same pair on the same body crosses (367 pairs when this was written).
+    # (service.pipeline.junctions.raising), the pants keep their crotch, and the pair comes out clean
+    # by issue 21's measure (no crossing pair, at most 0.1 % of a garment's vertices inside: 0.03 % when
+    # this was written); without the gathering the same pair on the same body crosses (16 pairs then;
+    # 367 before the squeeze's segment test asked every vertex).
     ids = ["jacket", "pants"]
     assert models.raising(*ids) is not None and models.lowering(*ids) is None
     r = make_outfit(models, ids, held_out_beta, measure=True).report
-    assert r["collision_free"] and _tangle(r, "after") == (0, 0.0)
+    pairs, inside = _tangle(r, "after")
+    assert pairs == 0 and inside <= PENETRATION_LIMIT / 100
     monkeypatch.setattr(models, "raising", lambda inner, outer: None)
     assert make_outfit(models, ids, held_out_beta, measure=False).report["crossing_pairs"] > 0
 
