@@ -61,7 +61,7 @@ class OutfitModels:
     layering: LayeringRule | None = None
     _anchors: dict = field(default_factory=dict, repr=False)
     """Which orders cloth can take (``service.pipeline.layering``); made on first use when None."""
-    _lowerings: dict = field(default_factory=dict, repr=False)
+    _junctions: dict = field(default_factory=dict, repr=False)
     _drapes: dict = field(default_factory=dict, repr=False)
     _lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
 
@@ -92,15 +92,15 @@ class OutfitModels:
         """(the inner garment's raising, the outer garment's lowering) of an ordered pair, kept."""
         key = (inner_id, outer_id)
         with self._lock:  # two requests' threads may ask for the same pair at once
-            if key not in self._lowerings:
+            if key not in self._junctions:
                 (inner_drape, inner), (drape, outer) = (self._drape_profile(g) for g in key)
                 body = self.layering_rule().body
                 a, b = self.catalog[inner_id], self.catalog[outer_id]
                 tucked = a.category == "top" and b.category == "bottom"
                 up = junctions.raising(inner, outer, body, inner_drape, a.faces, drape) if tucked else None
                 down = None if up is not None else junctions.lowering(inner, outer, body, drape)
-                self._lowerings[key] = (up, down)
-            return self._lowerings[key]
+                self._junctions[key] = (up, down)
+            return self._junctions[key]
 
     def warm(self) -> None:
         """Make up front what requests would make on first use: the layering rule's profiles and every
