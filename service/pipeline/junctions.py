@@ -1,4 +1,5 @@
-"""An outer garment let down where an inner one's junction hangs lower (issue 21).
+"""An outer garment let down where an inner one's junction hangs lower, or a tucked top gathered up
+(issue 21).
 
 A junction is where a garment's cloth passes between two body parts: the armpit of a top (between
 arm and torso), the crotch of pants. Where the inner garment's junction hangs below the outer one's
@@ -16,6 +17,11 @@ The run is ``service.pipeline.layering.junction_run`` on the two garments' drape
 measured on both sides of the body at once, so the drop is the deeper side's, applied to each saddle
 (the garments are near symmetric). Pure functions of the two meshes: ``OutfitModels.lowering`` makes
 and keeps one per ordered pair, imported garments included.
+
+A top tucked into a bottom whose crotch is above its hem is the exception: the top's hem is gathered
+up above the crotch instead (``raising``, ``OutfitModels.raising``), since it is hidden under the
+bottom and a bottom's dropped crotch shows. Its extent is made once per pair; the crotch height it
+ends at is read on each body.
 """
 
 from __future__ import annotations
