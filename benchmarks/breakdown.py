@@ -12,7 +12,7 @@ For the outfits of ``benchmarks.latency`` (every body shape new, no quality meas
   body map's blocks), and of that one-thread time the part spent inside onnxruntime's ``run`` (field
   and untangler networks), inside scipy's KD-tree queries (nearest vertices of the closest-point
   queries, and the body map's fallback), inside the numba kernels (``KERNELS``: closest-point
-  selection, the body map's neighbours and weights, strain energy, crossing tests), and the rest
+  search, the body map's neighbours and weights, strain energy, crossing tests), and the rest
   (numpy and Python: the glue of the squeeze, the repair, the fit, the L-BFGS);
 - "floor": half of onnxruntime + KD-tree + numba, what two cores would need if all the numpy and
   Python work were free and both cores were always busy: what doing the same work faster could
@@ -47,8 +47,10 @@ from training.drape.dataset import sample_betas
 SPENT = {"onnxruntime": 0.0, "kdtree": 0.0, "numba": 0.0}
 # (module, name) of each compiled kernel as its caller calls it
 KERNELS = (
-    ("service.geometry.closest", "select"),
-    ("service.geometry.closest", "bounding_spheres"),
+    ("service.geometry.bvh_kernel", "closest"),
+    ("service.geometry.bvh_kernel", "corners"),
+    ("service.geometry.bvh_kernel", "boxes"),
+    ("service.geometry.bvh_kernel", "build"),
     ("service.geometry.near_vertices", "_select_k"),
     ("service.pipeline.canonical", "transfer_rows"),
     ("service.pipeline.strain", "_strain_kernel"),

@@ -1,15 +1,17 @@
-"""Exact closest points on a triangle mesh (numpy + scipy only).
+"""Exact closest points on a triangle mesh.
 
-Used by the canonical space (closest body point of a garment vertex) and by the drape's body
-collisions. ``closest_on_triangles`` is the vectorised point-triangle test (Ericson, Real-Time
-Collision Detection 5.1.5); ``ClosestPoint`` restricts it to triangles around the nearest
-vertices, and ``closest_point_reference`` checks every triangle. ``ClosestPoint.query`` runs the
-test in a compiled loop per point (``closest_kernel``); ``ClosestPoint.query_reference`` tests every
-candidate in numpy, and the two agree bit for bit.
+Used by the canonical space (closest body point of a garment vertex), the drape's body collisions,
+and the world-space squeeze and repair (most of a request's closest-point queries).
+``closest_on_triangles`` is the vectorised point-triangle test (Ericson, Real-Time Collision
+Detection 5.1.5). ``ClosestPoint.query`` finds the closest of all triangles through a hierarchy of
+boxes (``bvh_kernel``, compiled); ``ClosestPoint.query_reference`` (``closest_point_reference``)
+tests every triangle in numpy, and the two agree bit for bit. ``ClosestPoint.candidates`` (the
+triangles around a point's nearest vertices) serves the canonical space's body map.
 """
 
 from __future__ import annotations
 
+import weakref
 from dataclasses import dataclass, fields
 from functools import cached_property
 
@@ -17,7 +19,7 @@ import numpy as np
 from numba import njit
 from scipy.spatial import cKDTree
 
-from service.geometry.closest_kernel import bounding_spheres, select
+from service.geometry import bvh_kernel
 from service.geometry.mesh import check_mesh, face_normals
 from service.geometry.mesh_topology import LazyPseudoNormals, MeshTopology, PseudoNormals, mesh_topology
 from service.process.threads import pool
@@ -98,25 +100,37 @@ def _finish(points, vertices, faces, fn, face, bary, pseudo: PseudoNormals, poin
 
 
 def closest_point_reference(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray) -> Closest:
-    """Closest points by testing every triangle: O(N F), for tests and tiny meshes."""
+    """Closest points by testing every triangle: O(N F), for tests and small meshes. Of triangles
+    at the same distance, the lowest index (``np.argmin``)."""
     points = _check_points(points)
     check_mesh(vertices, faces)
-    tri = vertices[faces]
-    w = closest_on_triangles(points[:, None], tri[None, :, 0], tri[None, :, 1], tri[None, :, 2])
-    q = np.einsum("nfk,fkd->nfd", w, tri)
-    face = np.argmin(np.linalg.norm(points[:, None] - q, axis=2), axis=1)
+    vertices, faces = np.asarray(vertices, dtype=np.float64), np.asarray(faces, dtype=np.int64)
+    face, bary = np.zeros(len(points), dtype=np.int64), np.zeros((len(points), 3))
+    tri = vertices[faces]  # (F, 3, 3)
+    step = max(1, REFERENCE_PAIRS // max(len(faces), 1))
+    for s in range(0, len(points), step):
+        p = np.repeat(points[s : s + step], len(faces), axis=0)  # (n F, 3): every pair once
+        t = np.tile(tri, (len(p) // max(len(faces), 1), 1, 1))
+        w = closest_on_triangles(p, t[:, 0], t[:, 1], t[:, 2])
+        d = np.linalg.norm(p - np.einsum("mk,mkd->md", w, t), axis=1).reshape(-1, len(faces))
+        best = np.argmin(d, axis=1)
+        face[s : s + step] = best
+        bary[s : s + step] = w.reshape(-1, len(faces), 3)[np.arange(len(best)), best]
     fn = face_normals(vertices, faces)
     pseudo = PseudoNormals.build(vertices, faces, fn)
-    return _finish(points, vertices, faces, fn, face, w[np.arange(len(points)), face], pseudo)
+    return _finish(points, vertices, faces, fn, face, bary, pseudo)
+
+
+REFERENCE_PAIRS = 2_000_000  # (point, triangle) pairs per block of the reference: ~0.5 GB of arrays
 
 
 class ClosestPoint:
     """Closest-point queries against a fixed triangle mesh.
 
-    Candidates are the triangles around the ``k`` nearest vertices: exact whenever the closest
-    triangle touches one of them, which holds for the well-shaped meshes used here (checked
-    against ``closest_point_reference`` in the tests). The search structures are built on the first
-    query: the repair builds one for every layer it returns, and nothing asks the outermost.
+    The search structures are built on the first query: the repair builds one for every layer it
+    returns, and nothing asks the outermost. The hierarchy's tree depends on the faces only and is
+    kept for every faces array seen (``_hierarchy``): a request's meshes (its body, its garments in
+    world space) share their faces with every other request's, and only the boxes are made anew.
     """
 
     def __init__(self, vertices: np.ndarray, faces: np.ndarray):
@@ -146,9 +160,12 @@ class ClosestPoint:
         return cKDTree(self.vertices, leafsize=32, balanced_tree=False, compact_nodes=False)
 
     @cached_property
-    def spheres(self) -> np.ndarray:
-        """(F, 4) bounding sphere of each triangle, for the compiled selection."""
-        return bounding_spheres(self.vertices, self.faces)
+    def boxes(self) -> tuple:
+        """The hierarchy of ``bvh_kernel`` over this mesh: (corners (F, 3, 3) in leaf order, lo (N, 3),
+        hi (N, 3), left (N,), start (N,), count (N,), order (F,))."""
+        left, start, count, order = _hierarchy(self.faces, self.vertices)
+        tri = bvh_kernel.corners(self.vertices, self.faces, order)
+        return (tri, *bvh_kernel.boxes(tri, left, start, count), left, start, count, order)
 
     @cached_property
     def fn(self) -> np.ndarray:
@@ -220,9 +237,8 @@ class ClosestPoint:
         np.put_along_axis(d, order, d_unique[slot], 1)
         return cand, w, np.where(valid, d, np.inf)
 
-    def query(self, points: np.ndarray, k: int = 4) -> Closest:
-        """Closest points of ``points (N, 3)`` on the mesh: ``query_reference`` bit for bit, at a third
-        of its cost per point.
+    def query(self, points: np.ndarray) -> Closest:
+        """Closest points of ``points (N, 3)`` on the mesh: ``query_reference`` bit for bit.
 
         From ``MIN_SPLIT`` points, blocks of about ``QUERY_BLOCK`` run on ``QUERY_THREADS`` threads (the
         KD-tree and the compiled selection release the GIL; each point's answer depends on that point
@@ -232,51 +248,27 @@ class ClosestPoint:
         """
         points = _check_points(points)
         if len(points) < MIN_SPLIT or QUERY_THREADS <= 1:
-            return self._query_block(points, k)
+            return self._query_block(points)
         # Build the lazy structures here: cached_property is not safe to fill from two threads.
-        _ = self.topology, self.ring, self.tree, self.spheres, self.fn, self.pseudo
+        _ = self.topology, self.boxes, self.fn, self.pseudo
         rounds = max(1, round(len(points) / (QUERY_BLOCK * QUERY_THREADS)))
         blocks = np.array_split(points, rounds * QUERY_THREADS)
-        parts = list(pool("closest", QUERY_THREADS).map(lambda b: self._query_block(b, k), blocks))
+        parts = list(pool("closest", QUERY_THREADS).map(self._query_block, blocks))
         return Closest(*(np.concatenate([getattr(p, f.name) for p in parts]) for f in fields(Closest)))
 
-    def query_reference(self, points: np.ndarray, k: int = 4) -> Closest:
-        """``query`` by Ericson's test on every candidate triangle (``candidates``), in one block."""
-        points = _check_points(points)
-        return self._finish(points, *self._select_reference(points, k))
+    def query_reference(self, points: np.ndarray) -> Closest:
+        """``query`` by Ericson's test on every triangle (``closest_point_reference``)."""
+        return closest_point_reference(points, self.vertices, self.faces)
 
-    def _query_block(self, points: np.ndarray, k: int) -> Closest:
-        return self._finish(points, *self._select(points, k))
-
-    def _finish(self, points, face, bary, point=None) -> Closest:
-        return _finish(points, self.vertices, self.faces, self.fn, face, bary, self.pseudo, point)
-
-    def _select_reference(self, points, k: int) -> tuple[np.ndarray, np.ndarray]:
-        """(face (N,), bary (N, 3)): the candidate with the least distance, the first in ring order
-        among equals."""
-        cand, w, d = self.candidates(points, k, workers=1)
-        best = np.argmin(d, axis=1)
-        rows = np.arange(len(points))
-        return cand[rows, best], w[rows, best]
-
-    def _select(self, points, k: int):
-        """``_select_reference`` and the closest points ``(N, 3)`` (or None), by the compiled loop of
-        ``closest_kernel``: each point's candidates tested once each, in registers."""
+    def _query_block(self, points: np.ndarray) -> Closest:
         n = len(points)
-        k = min(k, len(self.vertices))
-        # One KD-tree worker: more never paid on 2 cores (and costs 0.2 ms per call on small
-        # queries); the blocks already run on threads (``query``).
-        _, near = self.tree.query(points, k=k, workers=1)
         face, bary, point = np.empty(n, dtype=np.int64), np.empty((n, 3)), np.empty((n, 3))
-        select(points, self.vertices, self.faces, self.spheres, self.ring, near.reshape(n, k), face, bary,
-               point)  # fmt: skip
+        bvh_kernel.closest(points, *self.boxes, face, bary, point)
         missing = np.flatnonzero(face < 0)
-        if not len(missing):
-            return face, bary, point
-        # No triangle around a point's k vertices (unreferenced vertices), or a NaN point: as the
-        # reference has it.
-        face[missing], bary[missing] = self._select_reference(points[missing], k)
-        return face, bary, None
+        if len(missing):  # a NaN point, which no box holds: as the reference has it
+            ref = closest_point_reference(points[missing], self.vertices, self.faces)
+            face[missing], bary[missing], point[missing] = ref.face, ref.bary, ref.point
+        return _finish(points, self.vertices, self.faces, self.fn, face, bary, self.pseudo, point)
 
 
 QUERY_BLOCK = 4096
@@ -287,6 +279,26 @@ in the KD-tree and the compiled selection, which release the GIL: against the T-
 the jacket, 1,000 points took 2.2 ms in one block and 1.7 in two, 3,000 6.1 and 4.0; 300 gained nothing.
 Most of the squeeze's and the repair's queries are of 500-4,000 points, and they run while nothing
 else does."""
+
+
+_HIERARCHIES: dict[int, tuple] = {}
+
+
+def _hierarchy(faces: np.ndarray, vertices: np.ndarray) -> tuple:
+    """``bvh_kernel.build`` of ``faces``, built on ``vertices`` the first time these faces are seen and
+    kept while the array lives (keyed by identity: the catalog's and the body's faces live as long as
+    the models). The answers of ``closest`` do not depend on which vertices it was built on."""
+    key = id(faces)
+    entry = _HIERARCHIES.get(key)
+    if entry is not None and entry[0]() is faces:
+        return entry[1]
+    tree = bvh_kernel.build(vertices, faces, bvh_kernel.LEAF)
+    try:
+        ref = weakref.ref(faces, lambda _, key=key: _HIERARCHIES.pop(key, None))
+    except TypeError:  # not weakly referable: not kept
+        return tree
+    _HIERARCHIES[key] = (ref, tree)
+    return tree
 
 
 class KeptQueries:

@@ -1,11 +1,7 @@
-"""Compiled closest-point selection (numba): ``ClosestPoint._select_reference`` one point at a time.
-
-The numpy path spends most of a query on arrays of (point, candidate triangle) pairs: sorting them
-to test each pair once, screening them with bounds, gathering triangles. One compiled loop per point
-over its candidates in ring order does the same work in registers: Ericson's test
-(``closest.closest_on_triangles``) written out with the same operations in the same order, so the
-answer is the reference's bit for bit (tested), and the first candidate in ring order wins ties, as
-the reference's argmin. ``nogil``: the query's blocks run on two threads.
+"""Compiled point-triangle test (numba): Ericson's test (``closest.closest_on_triangles``) for one
+point and one triangle, written out with the same operations in the same order, so that the compiled
+searches built on it (``bvh_kernel``; the body map's ``canonical_kernel``) answer as the numpy
+references bit for bit (tested). ``bounding_spheres`` bounds triangles for the body map's screening.
 
 Compiled on first use and cached on disk (``cache=True``: next to this file, or in
 ``NUMBA_CACHE_DIR``; the container image compiles it at build time).
@@ -80,44 +76,6 @@ def closest_on(px, py, pz, vertices, faces, f, w):
     qz = w[0] * a[2] + w[1] * b[2] + w[2] * c[2]
     dx, dy, dz = px - qx, py - qy, pz - qz
     return np.sqrt(dx * dx + dy * dy + dz * dz), qx, qy, qz
-
-
-@njit(cache=True, nogil=True)
-def select(points, vertices, faces, spheres, ring, near, face_out, bary_out, point_out):
-    """For each of ``points (N, 3)``: the closest point among the triangles of ``ring (V, R)`` (padded
-    with -1) around its nearest vertices ``near (N, k)``, into ``face_out (N,)`` (-1 where there is
-    no candidate), ``bary_out (N, 3)`` and ``point_out (N, 3)``. ``spheres (F, 4)``: a centre and
-    radius holding each triangle (``bounding_spheres``): a triangle whose sphere is farther than
-    the best distance so far cannot be closer, and is not tested."""
-    n, k = near.shape
-    r = ring.shape[1]
-    w = np.empty(3)
-    # Neighbouring vertices share most of their rings' triangles: each is tested once per point
-    # (the one tested first is the one the reference's argmin would keep among its repeats).
-    seen = np.full(len(faces), -1, dtype=np.int64)
-    for i in range(n):
-        px, py, pz = points[i, 0], points[i, 1], points[i, 2]
-        best = np.inf
-        face_out[i] = -1
-        for j in range(k):
-            v = near[i, j]
-            for s in range(r):
-                f = ring[v, s]
-                if f < 0:
-                    break
-                if seen[f] == i:
-                    continue
-                seen[f] = i
-                sx, sy, sz = px - spheres[f, 0], py - spheres[f, 1], pz - spheres[f, 2]
-                gap = np.sqrt(sx * sx + sy * sy + sz * sz) - spheres[f, 3]
-                if gap > best:  # strictly: a tie may still win by ring order
-                    continue
-                d, qx, qy, qz = closest_on(px, py, pz, vertices, faces, f, w)
-                if d < best:  # strict: the first in ring order wins ties, as argmin
-                    best = d
-                    face_out[i] = f
-                    bary_out[i, 0], bary_out[i, 1], bary_out[i, 2] = w[0], w[1], w[2]
-                    point_out[i, 0], point_out[i, 1], point_out[i, 2] = qx, qy, qz
 
 
 @njit(cache=True, nogil=True)

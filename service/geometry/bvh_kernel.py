@@ -1,0 +1,209 @@
+"""Compiled bounding-volume hierarchy over a mesh's triangles (numba): exact closest points.
+
+``ClosestPoint.query`` used to test the triangles around a point's 4 nearest vertices (a KD-tree query
+and a ring of candidates: ~2.8 us a point, exact only where the closest triangle touches one of those
+vertices). A hierarchy of axis-aligned boxes answers the closest triangle of all of them, and sooner:
+the boxes nearer than the best distance so far are opened, nearest first, and only their leaves'
+triangles are tested.
+
+The layout is flat: node ``n`` has a box ``lo[n], hi[n] (3,)``; an inner node's children are ``left[n]``
+and ``left[n] + 1``; a leaf (``left[n] < 0``) holds the triangles ``order[start[n]:start[n] + count[n]]``.
+Nodes are numbered parents before children, so ``boxes`` walks them backwards. The tree (``build``)
+depends on the faces alone; the boxes (``corners``, ``boxes``: ~0.1 ms for 10,000 triangles, against
+~3 ms for the tree) are made for each mesh of those faces.
+
+The triangle test is ``closest_kernel.barycentric`` (Ericson's, as ``closest_on_triangles``), and ties
+go to the lowest face index, as ``np.argmin`` over all faces (``closest.closest_point_reference``): the
+answer is the reference's bit for bit. The boxes are grown by a relative 1e-9 (as the triangles'
+bounding spheres of ``closest_kernel``) so that rounding never closes a box holding the closest
+triangle, and a box as far as the best distance is still opened (a tie in it may win by index).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from service.geometry.closest_kernel import barycentric
+
+LEAF = 4
+"""Triangles per leaf: 2, 4 and 8 answered the jacket's closest points in the same time within 10 %."""
+STACK = 128  # a median split's depth is ~log2(F / LEAF): 14 for 60,000 triangles
+
+
+@njit(cache=True, nogil=True)
+def _partition(keys, order, s, e, m):
+    """Reorder ``order[s:e]`` so that ``keys[order[m]]`` is in its sorted place, none before it larger
+    and none after it smaller (quickselect, middle pivot)."""
+    lo, hi = s, e - 1
+    while lo < hi:
+        pivot = keys[order[(lo + hi) // 2]]
+        i, j = lo, hi
+        while i <= j:
+            while keys[order[i]] < pivot:
+                i += 1
+            while keys[order[j]] > pivot:
+                j -= 1
+            if i <= j:
+                order[i], order[j] = order[j], order[i]
+                i += 1
+                j -= 1
+        if m <= j:
+            hi = j
+        elif m >= i:
+            lo = i
+        else:
+            return
+
+
+@njit(cache=True, nogil=True)
+def build(vertices, faces, leaf):
+    """The hierarchy of ``faces (F, 3)`` over ``vertices (V, 3)``: (left (N,), start (N,), count (N,),
+    order (F,)), each inner node split at the median of its triangles' centroids along the longest
+    side of their bounds, down to ``leaf`` triangles. It holds for any vertex positions (``boxes``):
+    only how fast ``closest`` answers depends on the ones it was built on."""
+    nf = len(faces)
+    centroid = np.empty((nf, 3))
+    for f in range(nf):
+        for d in range(3):
+            a, b, c = vertices[faces[f, 0], d], vertices[faces[f, 1], d], vertices[faces[f, 2], d]
+            centroid[f, d] = (a + b + c) / 3.0
+    order = np.arange(nf)
+    cap = 2 * nf + 1  # every leaf holds a triangle at least: at most 2 F - 1 nodes
+    left = np.full(cap, -1, dtype=np.int64)
+    start, count = np.zeros(cap, dtype=np.int64), np.zeros(cap, dtype=np.int64)
+    keys = np.empty(nf)
+    todo = np.empty((STACK, 3), dtype=np.int64)  # (node, first, end)
+    todo[0, 0], todo[0, 1], todo[0, 2] = 0, 0, nf
+    top, nodes = 1, 1
+    while top:
+        top -= 1
+        n, s, e = todo[top, 0], todo[top, 1], todo[top, 2]
+        start[n], count[n] = s, e - s
+        if e - s <= leaf:
+            continue
+        cmin, cmax = np.full(3, np.inf), np.full(3, -np.inf)
+        for t in range(s, e):
+            for d in range(3):
+                c = centroid[order[t], d]
+                cmin[d] = min(cmin[d], c)
+                cmax[d] = max(cmax[d], c)
+        axis = 0
+        for d in range(1, 3):
+            if cmax[d] - cmin[d] > cmax[axis] - cmin[axis]:
+                axis = d
+        for t in range(s, e):
+            keys[order[t]] = centroid[order[t], axis]
+        m = (s + e) // 2
+        _partition(keys, order, s, e, m)
+        left[n] = nodes
+        todo[top, 0], todo[top, 1], todo[top, 2] = nodes, s, m
+        todo[top + 1, 0], todo[top + 1, 1], todo[top + 1, 2] = nodes + 1, m, e
+        top += 2
+        nodes += 2
+    return left[:nodes].copy(), start[:nodes].copy(), count[:nodes].copy(), order
+
+
+@njit(cache=True, nogil=True)
+def _refit_inner(lo, hi, left):
+    for n in range(len(left) - 1, -1, -1):
+        c = left[n]
+        if c < 0:
+            continue
+        for d in range(3):
+            lo[n, d] = min(lo[c, d], lo[c + 1, d])
+            hi[n, d] = max(hi[c, d], hi[c + 1, d])
+
+
+@njit(cache=True, nogil=True)
+def boxes(tri, left, start, count):
+    """(lo (N, 3), hi (N, 3)): the nodes' boxes around their triangles' corners ``tri (F, 3, 3)`` in
+    leaf order (``corners``), grown by a relative 1e-9."""
+    lo, hi = np.empty((len(left), 3)), np.empty((len(left), 3))
+    for n in range(len(left)):
+        if left[n] >= 0:
+            continue
+        s, e = start[n], start[n] + count[n]
+        for d in range(3):
+            a, b = np.inf, -np.inf
+            for t in range(s, e):
+                a = min(a, min(tri[t, 0, d], min(tri[t, 1, d], tri[t, 2, d])))
+                b = max(b, max(tri[t, 0, d], max(tri[t, 1, d], tri[t, 2, d])))
+            pad = 1e-9 * max(abs(a), abs(b)) + 1e-12
+            lo[n, d], hi[n, d] = a - pad, b + pad
+    _refit_inner(lo, hi, left)
+    return lo, hi
+
+
+@njit(cache=True, nogil=True)
+def corners(vertices, faces, order):
+    """``(F, 3, 3)``: the corners of the triangles in leaf order, read one after the other by ``closest``."""
+    out = np.empty((len(order), 3, 3))
+    for t in range(len(order)):
+        for c in range(3):
+            for d in range(3):
+                out[t, c, d] = vertices[faces[order[t], c], d]
+    return out
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _closest_on(px, py, pz, tri, t, w):
+    """``closest_kernel.closest_on`` for the triangle ``tri[t] (3, 3)``."""
+    a, b, c = tri[t, 0], tri[t, 1], tri[t, 2]
+    barycentric(px, py, pz, a, b, c, w)
+    qx = w[0] * a[0] + w[1] * b[0] + w[2] * c[0]
+    qy = w[0] * a[1] + w[1] * b[1] + w[2] * c[1]
+    qz = w[0] * a[2] + w[1] * b[2] + w[2] * c[2]
+    dx, dy, dz = px - qx, py - qy, pz - qz
+    return np.sqrt(dx * dx + dy * dy + dz * dz), qx, qy, qz
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _box_distance(px, py, pz, lo, hi, n):
+    dx = max(lo[n, 0] - px, 0.0, px - hi[n, 0])
+    dy = max(lo[n, 1] - py, 0.0, py - hi[n, 1])
+    dz = max(lo[n, 2] - pz, 0.0, pz - hi[n, 2])
+    return dx * dx + dy * dy + dz * dz  # squared
+
+
+@njit(cache=True, nogil=True)
+def closest(points, tri, lo, hi, left, start, count, order, face_out, bary_out, point_out):
+    """For each of ``points (N, 3)``: the closest point on any triangle into ``face_out (N,)`` (-1 for
+    a point no test could place, e.g. NaN), ``bary_out (N, 3)`` and ``point_out (N, 3)``. ``tri``:
+    ``corners``; ``lo, hi``: ``boxes``."""
+    w = np.empty(3)
+    stack = np.empty(STACK, dtype=np.int64)
+    gap = np.empty(STACK)  # squared distance of each stacked node's box, computed when it was pushed
+    for i in range(len(points)):
+        px, py, pz = points[i, 0], points[i, 1], points[i, 2]
+        best = np.inf
+        best_face = -1
+        stack[0], gap[0] = 0, 0.0
+        top = 1
+        while top:
+            top -= 1
+            n = stack[top]
+            if gap[top] > best * best:
+                continue
+            c = left[n]
+            if c >= 0:
+                # The nearer child is opened first: it most likely holds the closest triangle, and the
+                # farther one is then often skipped.
+                da = _box_distance(px, py, pz, lo, hi, c)
+                db = _box_distance(px, py, pz, lo, hi, c + 1)
+                near, far, d_near, d_far = (c, c + 1, da, db) if da <= db else (c + 1, c, db, da)
+                if d_far <= best * best:
+                    stack[top], gap[top] = far, d_far
+                    top += 1
+                if d_near <= best * best:
+                    stack[top], gap[top] = near, d_near
+                    top += 1
+                continue
+            for t in range(start[n], start[n] + count[n]):
+                f = order[t]
+                d, qx, qy, qz = _closest_on(px, py, pz, tri, t, w)
+                if d < best or (d == best and f < best_face):
+                    best, best_face = d, f
+                    bary_out[i, 0], bary_out[i, 1], bary_out[i, 2] = w[0], w[1], w[2]
+                    point_out[i, 0], point_out[i, 1], point_out[i, 2] = qx, qy, qz
+        face_out[i] = best_face
