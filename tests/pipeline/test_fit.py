@@ -202,6 +202,39 @@ def test_far_layers_are_never_asked_for_gradients_and_do_not_change_the_fit():
     np.testing.assert_allclose(with_far.vertices, alone.vertices, atol=1e-12)
 
 
+def test_a_layer_the_bounds_put_far_is_never_asked_and_the_fit_is_the_same():
+    """Where ``bounds`` put a layer ``FAR_FIELD`` away, its field is not asked (values or gradients),
+    the fit returns the bound and ``INACTIVE`` there, and the fit is the one that asked everywhere
+    (the layer is beyond ``reach`` either way); where they do not, it is asked."""
+    from service.pipeline.fit import FAR_FIELD, INACTIVE
+
+    v, f = _sheet(z=0.002)
+    flat3 = planes([0.0, 0.002, 0.5])
+    asked = []
+
+    def fields(k, x, gradient):
+        asked.append((k, len(x)))
+        return flat3(k, x, gradient)
+
+    bounds = np.zeros((len(v), 3))
+    far = np.arange(len(v)) % 3 > 0  # two thirds of the vertices know layer 2 is far
+    bounds[far, 2] = FAR_FIELD + 0.01
+    res = fit_garment(v, f, 1, 3, fields, reference, bounds=bounds)
+    with_bounds, asked[:] = list(asked), []
+    every = fit_garment(v, f, 1, 3, fields, reference)
+    np.testing.assert_array_equal(res.vertices, every.vertices)
+    # Before and after the step, at the vertices not known far only.
+    assert [n for k, n in with_bounds if k == 2] == [(~far).sum()] * 2
+    assert [n for k, n in asked if k == 2] == [len(v)] * 2
+    moved = np.linalg.norm(res.vertices - v, axis=1)  # a bound holds less how far the vertex moved
+    assert moved[far].max() > 0.001
+    np.testing.assert_allclose(res.values[0][far, 2], FAR_FIELD + 0.01 - moved[far], rtol=0, atol=1e-15)
+    np.testing.assert_array_equal(res.values[1][far, 2], INACTIVE)
+    np.testing.assert_array_equal(res.values[0][~far], every.values[0][~far])
+    with pytest.raises(ValueError, match="reach"):
+        fit_garment(v, f, 1, 3, fields, reference, FitSettings(reach=FAR_FIELD), bounds)
+
+
 def test_the_values_a_fit_returns_are_the_fields_at_its_vertices():
     # The squeeze and the repair reuse them instead of evaluating the networks again.
     v, f = _sheet(n=8, z=0.009)

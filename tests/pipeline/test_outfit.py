@@ -139,10 +139,34 @@ def test_side_by_side_fits_equal_one_after_the_other(models, held_out_beta):
         return models.fields(layer_ids[k], x, held_out_beta, gradient)
 
     op = models.untangler("neural")
+    explicit = [models.explicit[gid].canonical(held_out_beta) for gid in ids]
+    bounds = models.far_bounds(ids, explicit, explicit)
     for i, (gid, world, faces) in enumerate(out.garments):
-        x0 = models.explicit[gid].canonical(held_out_beta)
-        fitted = fit_garment(x0, faces, i + 1, len(layer_ids), layer_fields, op, DEFAULT_FIT).vertices
+        fitted = fit_garment(explicit[i], faces, i + 1, len(layer_ids), layer_fields, op, DEFAULT_FIT,
+                             bounds[i]).vertices  # fmt: skip
         assert np.array_equal(world, models.space.to_body(fitted, out.body_vertices)), gid
+
+
+def test_the_far_bounds_are_below_the_distances_on_every_body(models, held_out_beta):
+    """``far_bounds`` skips a layer's field where its surface is provably far: each bound is at most the
+    exact canonical distance from the vertex to the other garment's explicit mesh on held-out bodies
+    at the corners of the box, and they skip something (pants against a jacket's sleeves)."""
+    from benchmarks.imported import corners
+    from service.geometry.closest import ClosestPoint
+    from service.pipeline.fit import FAR_FIELD
+
+    ids = ["pants", "tshirt", "jacket", "skirt"]
+    for beta in [held_out_beta, *corners()]:
+        explicit = [models.clear_of_body(models.explicit[g].canonical(beta)) for g in ids]
+        bounds = models.far_bounds(ids, explicit, explicit)
+        for i, x in enumerate(explicit):
+            for k, g in enumerate(ids):
+                if k == i:
+                    assert not bounds[i][:, k + 1].any()
+                    continue
+                exact = ClosestPoint.build(explicit[k], models.catalog[g].faces).query(x).distance
+                assert np.all(bounds[i][:, k + 1] <= exact), (ids[i], g)
+        assert (bounds[2][:, 1] >= FAR_FIELD).mean() > 0.3  # the jacket's sleeves and collar, from the pants
 
 
 @pytest.mark.parametrize("ids", [["long_sleeve", "tank_top"], ["shorts", "pants"]])
