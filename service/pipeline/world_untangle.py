@@ -18,7 +18,7 @@ from service.pipeline.repair import REACH, Inner, RepairSettings, repair_layer
 from service.pipeline.squeeze import Outer, SqueezeSettings, asks_segment_test, squeeze_layer
 
 DEFAULT_SQUEEZE = SqueezeSettings()
-PASSES = 3
+PASSES = 6
 BODY_QUERY_PAD = 0.01
 """m: garment vertices the body's canonical distance puts farther out than the repair's largest margin
 plus this are not asked for their
@@ -42,11 +42,16 @@ def untangle_world(models, layer_ids, beta, body, explicit, fitted, world, faces
     """The squeeze then the repair of the fitted world meshes; where faults are left, again from the
     repaired meshes, up to ``PASSES`` times (the repair lifted an outer layer over an inner one that the
     squeeze can now press under it: four tops on a heavy body, 123 crossing pairs in the armpits after
-    the first pass, 0 after the second). Returns the meshes with the fewest crossings, then vertices
-    inside, and their ``RepairResult``s. ``fitted`` is (fitted canonical vertices, the fits' field
-    values or None) per garment (``_field_at``). ``lowered``: per garment, how far (m) its explicit
-    mesh was let down from the one its fields were learned on (``service.pipeline.junctions``), which
-    widens where the garments over it look for it."""
+    the first pass, 0 after the second). Six passes, not three: a tank top under a jacket tucked into
+    pants kept 13 pants vertices inside the jacket after three (0.17 %), 0.04 % after six;
+    ``benchmarks.orders --pairs`` 114 -> 117 of 120 clean, ``--stacks 100`` 64 -> 65 of 85. Only
+    outfits with faults left run past the first pass.
+
+    Returns the meshes with the fewest crossings, then vertices inside, and their ``RepairResult``s.
+    ``fitted`` is (fitted canonical vertices, the fits' field values or None) per garment
+    (``_field_at``). ``lowered``: per garment, how far (m) its explicit mesh was let down from the one
+    its fields were learned on (``service.pipeline.junctions``), which widens where the garments over
+    it look for it."""
     lowered = lowered or [0.0] * len(world)
     best = None
     start = world
