@@ -66,16 +66,23 @@ def barycentric(px, py, pz, a, b, c, out):
 
 
 @njit(cache=True, nogil=True, inline="always")
-def closest_on(px, py, pz, vertices, faces, f, w):
-    """(distance, closest point x, y, z) of point p on triangle f, its barycentric coordinates into
-    ``w (3,)``: the reference's ``closest_on_triangles``, einsum and norm, in their order."""
-    a, b, c = vertices[faces[f, 0]], vertices[faces[f, 1]], vertices[faces[f, 2]]
+def closest_on_corners(px, py, pz, a, b, c, w):
+    """(distance, closest point x, y, z) of point p on triangle abc (``(3,)`` arrays), its barycentric
+    coordinates into ``w (3,)``: the reference's ``closest_on_triangles``, einsum and norm, in their
+    order."""
     barycentric(px, py, pz, a, b, c, w)
     qx = w[0] * a[0] + w[1] * b[0] + w[2] * c[0]
     qy = w[0] * a[1] + w[1] * b[1] + w[2] * c[1]
     qz = w[0] * a[2] + w[1] * b[2] + w[2] * c[2]
     dx, dy, dz = px - qx, py - qy, pz - qz
     return np.sqrt(dx * dx + dy * dy + dz * dz), qx, qy, qz
+
+
+@njit(cache=True, nogil=True, inline="always")
+def closest_on(px, py, pz, vertices, faces, f, w):
+    """``closest_on_corners`` for triangle ``f`` of ``faces`` over ``vertices``."""
+    a, b, c = vertices[faces[f, 0]], vertices[faces[f, 1]], vertices[faces[f, 2]]
+    return closest_on_corners(px, py, pz, a, b, c, w)
 
 
 @njit(cache=True, nogil=True)
