@@ -11,8 +11,9 @@ For the outfits of ``benchmarks.latency`` (every body shape new, no quality meas
 - "1 thread": everything on one thread (onnxruntime, the garments' fits, closest-point blocks, the
   body map's blocks), and of that one-thread time the part spent inside onnxruntime's ``run`` (field
   and untangler networks), inside scipy's KD-tree queries (the body map's fallback and the
-  near term's candidates; closest-point queries search a hierarchy of boxes, counted as numba), inside the numba kernels (``KERNELS``: closest-point
-  search, the body map's neighbours and weights, strain energy, crossing tests), and the rest
+  near term's candidates; closest-point queries search a hierarchy of boxes, counted as numba),
+  inside the numba kernels (``KERNELS``: closest-point search, the body map's neighbours and
+  weights, strain energy, crossing tests), and the rest
   (numpy and Python: the glue of the squeeze, the repair, the fit, the L-BFGS);
 - "floor": half of onnxruntime + KD-tree + numba, what two cores would need if all the numpy and
   Python work were free and both cores were always busy: what doing the same work faster could
