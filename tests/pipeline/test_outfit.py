@@ -184,18 +184,17 @@ def test_an_outer_garment_comes_down_around_a_lower_junction(models, held_out_be
 def test_a_long_top_tucked_into_pants_is_gathered_above_their_crotch(models, held_out_beta, monkeypatch):
     # The jacket's hem hangs below the pants' crotch: it is gathered up above it
     # (service.pipeline.junctions.raising), the pants keep their crotch, and the pair comes out clean
-    # by issue 21's measure (no crossing pair, at most 0.1 % of a garment's vertices inside: 0.04 % with
-    # six untangling passes). Without the gathering the jacket crosses the pants on the shortest woman
-    # (38 pairs; on the held-out body 16 pairs with three passes, 0.12 % inside with six).
-    from benchmarks.imported import corners
-
+    # by issue 21's measure (no crossing pair, at most 0.1 % of a garment's vertices inside: 0.00 % when
+    # this was written). Without the gathering it is not: 15 crossing pairs (16 with three untangling
+    # passes; 0 pairs but 0.12 % inside in a tree whose far-field bounds were 4 mm tighter).
     ids = ["jacket", "pants"]
     assert models.raising(*ids) is not None and models.lowering(*ids) is None
     r = make_outfit(models, ids, held_out_beta, measure=True).report
     pairs, inside = _tangle(r, "after")
     assert pairs == 0 and inside <= PENETRATION_LIMIT / 100
     monkeypatch.setattr(models, "raising", lambda inner, outer: None)
-    assert make_outfit(models, ids, corners()[2], measure=False).report["crossing_pairs"] > 0
+    pairs, inside = _tangle(make_outfit(models, ids, held_out_beta, measure=True).report, "after")
+    assert pairs > 0 or inside > PENETRATION_LIMIT / 100
 
 
 def test_garments_worn_the_usual_way_are_not_let_down(models):
