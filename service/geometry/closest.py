@@ -11,7 +11,7 @@ triangles around a point's nearest vertices) serves the canonical space's body m
 
 from __future__ import annotations
 
-import weakref
+import threading
 from dataclasses import dataclass, fields
 from functools import cached_property
 
@@ -129,8 +129,7 @@ class ClosestPoint:
 
     The search structures are built on the first query: the repair builds one for every layer it
     returns, and nothing asks the outermost. The hierarchy's tree depends on the faces only and is
-    kept for every faces array seen (``_hierarchy``): a request's meshes (its body, its garments in
-    world space) share their faces with every other request's, and only the boxes are made anew.
+    kept with their topology (``_hierarchy``): only the boxes are made for each mesh.
     """
 
     def __init__(self, vertices: np.ndarray, faces: np.ndarray):
@@ -163,7 +162,7 @@ class ClosestPoint:
     def boxes(self) -> tuple:
         """The hierarchy of ``bvh_kernel`` over this mesh: (corners (F, 3, 3) in leaf order, lo (N, 3),
         hi (N, 3), left (N,), start (N,), count (N,), order (F,))."""
-        left, start, count, order = _hierarchy(self.faces, self.vertices)
+        left, start, count, order = _hierarchy(self.topology, self.faces, self.vertices)
         tri = bvh_kernel.corners(self.vertices, self.faces, order)
         return (tri, *bvh_kernel.boxes(tri, left, start, count), left, start, count, order)
 
@@ -241,7 +240,7 @@ class ClosestPoint:
         """Closest points of ``points (N, 3)`` on the mesh: ``query_reference`` bit for bit.
 
         From ``MIN_SPLIT`` points, blocks of about ``QUERY_BLOCK`` run on ``QUERY_THREADS`` threads (the
-        KD-tree and the compiled selection release the GIL; each point's answer depends on that point
+        compiled search releases the GIL; each point's answer depends on that point
         alone, so the result is the same bit for bit): the repair's and the squeeze's queries are most
         of a request's time. The blocks are as many as the threads or a multiple, so that none idles
         at the end.
@@ -274,31 +273,26 @@ class ClosestPoint:
 QUERY_BLOCK = 4096
 QUERY_THREADS = 2
 MIN_SPLIT = 512
-"""Points from which a query is split over the threads. A point costs ~2 us on one thread, ~90 % of it
-in the KD-tree and the compiled selection, which release the GIL: against the T-shirt's vertices in
-the jacket, 1,000 points took 2.2 ms in one block and 1.7 in two, 3,000 6.1 and 4.0; 300 gained nothing.
+"""Points from which a query is split over the threads. A point costs ~1-2.5 us on one thread, most of
+it in the compiled search, which releases the GIL. Measured with the KD-tree search before it, against
+the T-shirt's vertices in the jacket: 1,000 points took 2.2 ms in one block and 1.7 in two, 3,000 6.1
+and 4.0; 300 gained nothing.
 Most of the squeeze's and the repair's queries are of 500-4,000 points, and they run while nothing
 else does."""
 
 
-_HIERARCHIES: dict[int, tuple] = {}
+_TREE_LOCK = threading.Lock()
 
 
-def _hierarchy(faces: np.ndarray, vertices: np.ndarray) -> tuple:
+def _hierarchy(topology: MeshTopology, faces: np.ndarray, vertices: np.ndarray) -> tuple:
     """``bvh_kernel.build`` of ``faces``, built on ``vertices`` the first time these faces are seen and
-    kept while the array lives (keyed by identity: the catalog's and the body's faces live as long as
-    the models). The answers of ``closest`` do not depend on which vertices it was built on."""
-    key = id(faces)
-    entry = _HIERARCHIES.get(key)
-    if entry is not None and entry[0]() is faces:
-        return entry[1]
-    tree = bvh_kernel.build(vertices, faces, bvh_kernel.LEAF)
-    try:
-        ref = weakref.ref(faces, lambda _, key=key: _HIERARCHIES.pop(key, None))
-    except TypeError:  # not weakly referable: not kept
-        return tree
-    _HIERARCHIES[key] = (ref, tree)
-    return tree
+    kept on their ``MeshTopology`` (one per distinct face array, ``mesh_topology``): a request's
+    meshes share their faces with every other request's. The answers of ``closest`` do not depend on
+    which vertices it was built on, only how fast they come."""
+    with _TREE_LOCK:
+        if topology.tree is None:
+            topology.tree = bvh_kernel.build(vertices, faces, bvh_kernel.LEAF)
+        return topology.tree
 
 
 class KeptQueries:

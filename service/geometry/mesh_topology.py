@@ -122,6 +122,9 @@ class MeshTopology:
     edge_faces: np.ndarray  # (E,) int64 how many triangles hold each edge
     boundary_edges: np.ndarray  # (B,) int64 sorted keys of the edges with one triangle
     boundary_vertices: np.ndarray  # (V,) bool the ends of the boundary edges
+    tree: tuple | None = None
+    """``service.geometry.bvh_kernel.build``'s tree of these faces (left, start, count, order), filled
+    by ``ClosestPoint`` on its first query of a mesh with them: it holds for any vertex positions."""
 
     @classmethod
     def build(cls, faces: np.ndarray, n_v: int) -> MeshTopology:

@@ -5,7 +5,7 @@ import numpy as np
 import trimesh
 
 from service.geometry import bvh_kernel
-from service.geometry.closest import _HIERARCHIES, ClosestPoint, closest_point_reference
+from service.geometry.closest import ClosestPoint, closest_point_reference
 
 FIELDS = ("face", "bary", "point", "distance", "signed", "normal")
 
@@ -37,32 +37,22 @@ def test_every_triangle_sits_in_one_leaf_and_every_box_holds_its_triangles():
 
 
 def test_a_tree_kept_from_other_vertices_answers_as_the_reference():
-    """The tree is built on the first vertices a faces array comes with; on a mesh of the same faces
-    bent out of that shape (as a garment on another body), the answers are still every triangle's
-    closest, bit for bit, only found later."""
+    """The tree is built on the first vertices a faces array comes with, and kept with its topology;
+    on a mesh of the same faces bent out of that shape (as a garment on another body), the answers are
+    still every triangle's closest, bit for bit, only found later."""
     v, f = _sphere()
-    _HIERARCHIES.pop(id(f), None)
     first = ClosestPoint.build(v, f)
     first.query(v[:5])
-    assert id(f) in _HIERARCHIES
+    assert first.topology.tree is not None
     rng = np.random.default_rng(4)
     bent = v * np.array([1.6, 0.7, 1.0]) + 0.05 * np.sin(8 * v[:, [1, 2, 0]])
-    mesh = ClosestPoint.build(bent, f)
-    assert mesh.boxes[-1] is _HIERARCHIES[id(f)][1][-1]  # the kept tree, new boxes
+    mesh = ClosestPoint.build(bent, f.copy())  # the same faces, another array: the same topology
+    assert mesh.boxes[-1] is first.topology.tree[-1]  # the kept tree, new boxes
+    assert not np.array_equal(mesh.boxes[1], first.boxes[1])
     points = np.concatenate([bent[rng.integers(0, len(bent), 300)], rng.normal(scale=0.25, size=(600, 3))])
     got, ref = mesh.query(points), closest_point_reference(points, bent, f)
     for name in FIELDS:
         np.testing.assert_array_equal(getattr(got, name), getattr(ref, name), err_msg=name)
-
-
-def test_the_kept_tree_goes_with_its_faces():
-    v, f = _sphere(2)
-    f = f.copy()
-    ClosestPoint.build(v, f).query(v[:3])
-    key = id(f)
-    assert key in _HIERARCHIES
-    del f
-    assert key not in _HIERARCHIES
 
 
 def test_a_nan_point_is_answered_as_the_reference():
