@@ -300,8 +300,11 @@ class KeptQueries:
     between calls: a point that did not move gets its last answer (the query is a function of the
     point alone), so the repair's and the squeeze's rounds only ask for what they moved."""
 
-    def __init__(self, mesh: ClosestPoint, n: int):
+    def __init__(self, mesh: ClosestPoint, n: int, reversed_faces: np.ndarray | None = None):
         self.mesh = mesh
+        self.reversed = reversed_faces
+        """(F,) bool or None: faces whose outside is against their winding (a fold's middle sheet), whose
+        signed distances and normals are kept turned over."""
         self.points = np.full((n, 3), np.nan)  # NaN: never asked
         self.signed = np.zeros(n)
         self.point = np.zeros((n, 3))
@@ -325,6 +328,10 @@ class KeptQueries:
         self.points[idx] = x[idx]
         self.signed[idx], self.point[idx], self.normal[idx] = q.signed, q.point, q.normal
         self.rim[idx] = self.mesh.on_boundary(q)
+        if self.reversed is not None:
+            turned = idx[self.reversed[q.face]]
+            self.signed[turned] *= -1
+            self.normal[turned] *= -1
 
 
 @njit(cache=True, nogil=True)

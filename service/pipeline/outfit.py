@@ -422,6 +422,11 @@ def _measures(models, layer_ids, body, beta, explicit, before, fitted, world, fa
         def h_at(inner, outer, canonical=canonical):
             return models.fields(layer_ids[inner], canonical[outer - 1], beta).h
 
-        out[f"penetration_{name}"] = {k: round(v, 6) for k, v in penetration(layers, h_at).items()}
+        def reversed_at(inner, layers=layers):
+            v, f = layers[inner].vertices, layers[inner].faces
+            return models.anchors(layer_ids[inner]).reversed_faces(v, f, body, models.body.faces)
+
+        measured = penetration(layers, h_at, reversed_at)
+        out[f"penetration_{name}"] = {k: round(v, 6) for k, v in measured.items()}
         out[f"intersections_{name}"] = intersections(layers)
     return out

@@ -53,6 +53,9 @@ class Inner:
     whatever this says: the exact crossing tests cover every near triangle."""
     kept: KeptQueries | None = None
     """Closest points on ``mesh`` already asked for (of these V vertices), or None: none yet."""
+    reversed_faces: np.ndarray | None = None
+    """(F,) bool: faces of ``mesh`` whose outside (away from the body) is against their winding
+    (``service.pipeline.squeeze.reversed_faces``); None: none."""
 
 
 @dataclass(frozen=True)
@@ -82,18 +85,22 @@ class RepairResult:
     crossing_pairs: int  # triangle pairs still crossing an inner layer at the end (0 = success)
     inside: int  # vertices still inside an inner layer at the end (0 = success)
     log: list[dict] = field(default_factory=list)
+    faults: list[np.ndarray] = field(default_factory=list)
+    """Per inner layer, ``(K,)`` indices of its own vertices where the faults left are: the corners of its
+    triangles still crossing this layer, and the closest-face corners of this layer's vertices inside it
+    (``service.pipeline.world_untangle`` presses the inner garment deeper there in its next pass)."""
 
 
 def _pushes(x: np.ndarray, inner: Inner, margin: np.ndarray, band: float, forced: np.ndarray, queries=None):
     """The vertices of ``x (V, 3)`` that violate ``margin (V,)`` against ``inner``, where they go, and
-    how many are inside it: (indices (K,), targets (K, 3), count). ``forced (V,)`` marks vertices of
+    which of them are inside it: (indices (K,), targets (K, 3), inside (J,) indices). ``forced (V,)`` marks vertices of
     crossing triangles: inside the inner layer they move out even where its covariant field says it
     does not cover them (a T-shirt's hem poking through the pants it is tucked into). ``queries``
     (``KeptQueries`` of ``inner.mesh``) keeps the closest points of the vertices that did not move."""
     ask = inner.near if inner.query is None else inner.near & (inner.query | forced)
     near = np.flatnonzero(ask)
     if not len(near):
-        return near, np.zeros((0, 3)), 0
+        return near, np.zeros((0, 3)), near
     signed, point, normal, rim = (queries or KeptQueries(inner.mesh, len(x))).at(x, near)
     inside = signed < 0
     # A vertex pushed to the margin last round lands a rounding error short of it: 10 % slack stops
@@ -107,7 +114,7 @@ def _pushes(x: np.ndarray, inner: Inner, margin: np.ndarray, band: float, forced
     bad = short & (inner.closed | (~past & (~inside | ((signed > -band) & covered))))
     idx = near[bad]
     # Out along the face normal from the closest point, to the margin.
-    return idx, point[bad] + margin[idx, None] * normal[bad], int((bad & inside).sum())
+    return idx, point[bad] + margin[idx, None] * normal[bad], near[bad & inside]
 
 
 def _clear_of(x: np.ndarray, faces: np.ndarray, kept: KeptQueries) -> np.ndarray:
@@ -189,33 +196,38 @@ def repair_layer(
     # around those (the rest of a body never changes between rounds).
     tested = [np.flatnonzero(layer.near[faces].any(axis=1)) for layer in inner]
 
-    def grid(n: int) -> TriangleGrid:
+    def grid(n: int) -> tuple[TriangleGrid, np.ndarray]:
         corners = np.zeros(len(x), dtype=bool)  # the tested triangles' corners: the same bounding box
         corners[faces[tested[n]].ravel()] = True
         around = _faces_around(inner[n].mesh, x[corners], settings.band)
-        return TriangleGrid.build(inner[n].mesh.vertices, inner[n].mesh.faces[around])
+        return TriangleGrid.build(inner[n].mesh.vertices, inner[n].mesh.faces[around]), around
 
     # One grid per inner layer, built side by side (its cell lists are compiled and release the GIL).
-    grids = [grid(0)] if len(inner) == 1 else list(pool("grids", 2).map(grid, range(len(inner))))
-    queries = [KeptQueries(layer.mesh, len(x)) if layer.kept is None else layer.kept for layer in inner]
+    built = [grid(0)] if len(inner) == 1 else list(pool("grids", 2).map(grid, range(len(inner))))
+    grids = [g for g, _ in built]
+    queries = [KeptQueries(layer.mesh, len(x), layer.reversed_faces) if layer.kept is None else layer.kept
+               for layer in inner]  # fmt: skip
     # Crossing pairs (tested triangle, inner triangle) of each layer, and the vertices they were
     # found at: a triangle none of whose vertices moved keeps its pairs (the inner layers are fixed).
     hits = [np.zeros((0, 2), dtype=np.int64) for _ in inner]
     tested_at = np.full_like(x, np.nan)
     log = []
     crossing, rounds = -1, 0  # -1: not tested yet
-    best = (np.inf, x.copy(), -1, -1, 0)  # (crossing pairs + vertices inside, x, crossing, inside, round)
+    # (crossing pairs + vertices inside, x, crossing, inside, round, the faults' places)
+    best = (np.inf, x.copy(), -1, -1, 0, [])
     while True:
         held = np.zeros(len(x), dtype=bool)
         u = np.zeros_like(x)
-        inside = 0
+        inside, inside_at = 0, []
         for layer, q in zip(inner, queries, strict=True):
-            idx, target, n_inside = _pushes(x + u, layer, margin, settings.band, forced, q)
+            idx, target, within = _pushes(x + u, layer, margin, settings.band, forced, q)
             u[idx] = target - x[idx]
             held[idx] = True
-            inside += n_inside
+            inside += len(within)
+            inside_at.append(within)
         if crossing >= 0 and crossing + inside < best[0]:
-            best = (crossing + inside, x.copy(), crossing, inside, rounds)
+            places = [(h[:, 1].copy(), w) for h, w in zip(hits, inside_at, strict=True)]
+            best = (crossing + inside, x.copy(), crossing, inside, rounds, places)
         # Done when the current meshes cross nothing and no vertex is inside an inner layer: the margin
         # is a cushion, not a measure (a vertex squeezed between two inner layers closer than the margin
         # would otherwise be pushed back and forth until the round cap).
@@ -252,7 +264,22 @@ def repair_layer(
             forced[worse] = True
             margin[worse] = np.minimum(settings.growth * margin[worse], settings.max_margin)
             kick[worse] = settings.margin
+    places = [(h[:, 1].copy(), w) for h, w in zip(hits, inside_at, strict=True)]
     if crossing + inside > best[0]:  # stopped while oscillating: return the round with the fewest faults
-        _, x, crossing, inside, _ = best
+        _, x, crossing, inside, _, places = best
     moved = np.any(x != np.asarray(vertices, dtype=np.float64), axis=1)
-    return RepairResult(x, moved, rounds, crossing, inside, log)
+    faults = [_fault_corners(layer.mesh, x, around, *where)
+              for layer, (_, around), where in zip(inner, built, places, strict=True)]  # fmt: skip
+    return RepairResult(x, moved, rounds, crossing, inside, log, faults)
+
+
+def _fault_corners(mesh: ClosestPoint, x: np.ndarray, around: np.ndarray, crossed: np.ndarray,
+                   inside: np.ndarray) -> np.ndarray:  # fmt: skip
+    """``(K,)`` vertices of the inner ``mesh`` at the faults: the corners of its triangles ``around[crossed]``
+    (grid indices of crossing pairs) and of the faces closest to the vertices ``x[inside]``."""
+    if not len(crossed) and not len(inside):
+        return np.zeros(0, dtype=np.int64)
+    faces = around[crossed]
+    if len(inside):
+        faces = np.concatenate([faces, mesh.query(x[inside]).face])
+    return np.unique(mesh.faces[faces].ravel())

@@ -97,6 +97,20 @@ class BodyAnchors:
         corners = body_vertices[body_faces[self.face]]  # (V, 3, 3)
         return np.einsum("vk,vkx->vx", self.bary, corners)
 
+    def reversed_faces(self, vertices: np.ndarray, faces: np.ndarray, body_vertices: np.ndarray,
+                       body_faces: np.ndarray) -> np.ndarray:  # fmt: skip
+        """``(F,)`` bool: faces of the garment ``vertices (V, 3)``, ``faces (F, 3)`` on this body whose
+        normal points against the body's, summed over their corners' anchor faces: the middle sheet of a
+        Z-fold, seen from above, says "inside" where a vertex is over it. A layer pushed out along it
+        went into the body: a tank top over a jacket's chest fold, pushed back and forth between the
+        two for 24 rounds."""
+        b = body_vertices[body_faces[self.face]]  # (V, 3, 3)
+        body_normal = np.cross(b[:, 1] - b[:, 0], b[:, 2] - b[:, 0])
+        body_normal /= np.maximum(np.linalg.norm(body_normal, axis=1, keepdims=True), 1e-30)
+        t = vertices[faces]
+        normal = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
+        return np.einsum("fx,fx->f", normal, body_normal[faces].sum(axis=1)) < 0
+
 
 def beyond(x: np.ndarray, anchors: np.ndarray, outer: Outer, kept: KeptQueries) -> np.ndarray:
     """``(V,)`` bool: vertices of ``x (V, 3)`` whose segment from their anchor ``(V, 3)`` crosses the
@@ -154,18 +168,18 @@ STEPS = 4  # of the walk towards the body; a vertex still outside after them wai
 
 
 def _pulls(x: np.ndarray, outer: Outer, kept: KeptQueries, body: KeptQueries, floor: float, settings,
-           anchors: np.ndarray | None = None):  # fmt: skip
-    """Vertices of ``x (V, 3)`` outside ``outer`` where it covers them, and their targets: (indices
-    (K,), targets (K, 3)). ``kept`` and ``body`` keep the closest points on the outer layer and on the
-    body of the vertices that did not move since the last round; ``anchors (V, 3)``: the body points
-    the ``outer.beyond`` vertices walk to."""
+           margin: np.ndarray, anchors: np.ndarray | None = None):  # fmt: skip
+    """Vertices of ``x (V, 3)`` outside ``outer`` where it covers them (by less than ``margin (V,)``
+    inside it), and their targets: (indices (K,), targets (K, 3)). ``kept`` and ``body`` keep the
+    closest points on the outer layer and on the body of the vertices that did not move since the last
+    round; ``anchors (V, 3)``: the body points the ``outer.beyond`` vertices walk to."""
     cand = np.flatnonzero(outer.near & outer.covered)
     if not len(cand):
         return cand, np.zeros((0, 3))
     signed_out = kept.at(x, cand)[0]
     far = outer.beyond[cand] if outer.beyond is not None else np.zeros(len(cand), dtype=bool)
     # 10 % slack, as in the repair: a vertex pulled to the margin lands a rounding error short of it.
-    bad = (signed_out > -0.9 * settings.margin) & ((signed_out < settings.band) | far)
+    bad = (signed_out > -0.9 * margin[cand]) & ((signed_out < settings.band) | far)
     idx = cand[bad]
     if not len(idx):
         return idx, np.zeros((0, 3))
@@ -178,6 +192,7 @@ def _pulls(x: np.ndarray, outer: Outer, kept: KeptQueries, body: KeptQueries, fl
     if not len(idx):
         return idx, np.zeros((0, 3))
     span = np.maximum(np.linalg.norm(p - c, axis=1), 1e-12)
+    m = margin[idx]
     # Walk the kept fraction s of the distance to the body down from 1: the signed distance changes at
     # most as fast as the point moves, so a step of (distance + margin) never passes the margin inside
     # the outer layer, and meets it exactly where the walk is along the outer layer's normal; obliquely
@@ -188,12 +203,12 @@ def _pulls(x: np.ndarray, outer: Outer, kept: KeptQueries, body: KeptQueries, fl
     signed = signed_out[bad][keep]
     walking = np.arange(len(idx))
     for _ in range(STEPS):
-        s[walking] = np.maximum(low[walking], s[walking] - (signed + settings.margin) / span[walking])
+        s[walking] = np.maximum(low[walking], s[walking] - (signed + m[walking]) / span[walking])
         walking = walking[s[walking] > low[walking]]
         if not len(walking):
             break
         signed = outer.mesh.query(c[walking] + s[walking, None] * (p - c)[walking]).signed
-        keep = signed > -0.9 * settings.margin
+        keep = signed > -0.9 * m[walking]
         walking, signed = walking[keep], signed[keep]
         if not len(walking):
             break
@@ -218,12 +233,15 @@ def squeeze_layer(
     floor: float,
     settings: SqueezeSettings = SqueezeSettings(),
     anchors: np.ndarray | None = None,
+    margin: np.ndarray | None = None,
 ) -> SqueezeResult:
     """Pull garment ``vertices (V, 3)``, ``faces (F, 3)`` towards the ``body`` mesh, inside the
     ``outer`` layers that cover it, but no closer to the body than ``floor`` (m). With ``anchors``
     (``(V, 3)``, ``BodyAnchors.on`` this body) vertices under an outer layer by the segment test are
-    pulled too (``beyond``)."""
+    pulled too (``beyond``). ``margin (V,)``: how far inside the outer layers each vertex goes (m;
+    default ``settings.margin`` everywhere)."""
     x0 = np.asarray(vertices, dtype=np.float64)
+    margin = np.full(len(x0), settings.margin) if margin is None else np.asarray(margin, dtype=np.float64)
     x = x0.copy()
     kept = [KeptQueries(layer.mesh, len(x)) for layer in outer]
     if anchors is not None:  # the caller's layers stay as they were
@@ -241,7 +259,7 @@ def squeeze_layer(
         u = np.zeros_like(x)
         held = np.zeros(len(x), dtype=bool)
         for layer, queries in zip(outer, kept, strict=True):
-            idx, target = _pulls(x + u, layer, queries, on_body, floor, settings, anchors)
+            idx, target = _pulls(x + u, layer, queries, on_body, floor, settings, margin, anchors)
             u[idx] = target - x[idx]
             held[idx] = True
         outside = int(held.sum())
