@@ -93,10 +93,11 @@ class RepairResult:
 
 def _pushes(x: np.ndarray, inner: Inner, margin: np.ndarray, band: float, forced: np.ndarray, queries=None):
     """The vertices of ``x (V, 3)`` that violate ``margin (V,)`` against ``inner``, where they go, and
-    which of them are inside it: (indices (K,), targets (K, 3), inside (J,) indices). ``forced (V,)`` marks vertices of
-    crossing triangles: inside the inner layer they move out even where its covariant field says it
-    does not cover them (a T-shirt's hem poking through the pants it is tucked into). ``queries``
-    (``KeptQueries`` of ``inner.mesh``) keeps the closest points of the vertices that did not move."""
+    which of them are inside it: (indices (K,), targets (K, 3), inside (J,) indices). ``forced (V,)``
+    marks vertices of crossing triangles: inside the inner layer they move out even where its covariant
+    field says it does not cover them (a T-shirt's hem poking through the pants it is tucked into).
+    ``queries`` (``KeptQueries`` of ``inner.mesh``) keeps the closest points of the vertices that did
+    not move."""
     ask = inner.near if inner.query is None else inner.near & (inner.query | forced)
     near = np.flatnonzero(ask)
     if not len(near):

@@ -98,7 +98,8 @@ def _deepen(results, faces, deep: list[np.ndarray], pressed: dict) -> None:
             pressed[(n, i)] = pressed.get((n, i), np.zeros(len(mask), dtype=bool)) | mask
 
 
-def _squeeze(models, layer_ids, beta, fitted, world, faces, body: ClosestPoint, deep, pressed) -> list[np.ndarray]:
+def _squeeze(models, layer_ids, beta, fitted, world, faces, body: ClosestPoint, deep: list[np.ndarray],
+             pressed: dict) -> list[np.ndarray]:  # fmt: skip
     """World meshes with every garment pulled inside the outer ones that cover it
     (``service.pipeline.squeeze``), from the outermost inwards. Where an outer garment covers a vertex and how
     far it is comes from the outer garment's fields at the vertex's fitted canonical position, as in
