@@ -1,0 +1,190 @@
+"""Folds and what the untangling reads from them: faces that face the body (a fold's middle sheet, a garment
+worn inside out), the measure's crossing parity there, and the squeeze pressing deeper where a pass left
+faults. Hand-made layers over a flat body (the plane z = 0, outside +z)."""
+
+from __future__ import annotations
+
+import numpy as np
+import trimesh
+
+from service.geometry.closest import ClosestPoint, KeptQueries
+from service.geometry.intersections import intersecting_pairs
+from service.pipeline.quality import Layer, penetration
+from service.pipeline.repair import Inner, RepairResult, RepairSettings, repair_layer
+from service.pipeline.squeeze import BodyAnchors, Outer, SqueezeSettings, squeeze_layer
+from service.pipeline.world_untangle import DEEPEN, DEEPEN_RING, _deepen
+from tests.meshes import grid_mesh
+
+
+def _sheet(n: int, size: float, z: float, inside_out: bool = False):
+    v, f = grid_mesh(n)
+    v = (v - [0.5, 0.5, 0]) * [size, size, 0] + [0, 0, z]
+    return v, (f[:, ::-1].copy() if inside_out else f)
+
+
+def _box_body():
+    box = trimesh.creation.box(extents=[1.0, 1.0, 0.2])
+    return np.asarray(box.vertices) - [0, 0, 0.1], np.asarray(box.faces)  # top face at z = 0
+
+
+def _z_fold(n_y: int = 8):
+    """A strip (x, z) bottom sheet z = 10 mm over x in [-0.1, 0.03], back along z = 13 mm to x = -0.03
+    (the middle sheet, facing the body), forward along z = 16 mm to x = 0.1; extruded over y in
+    [-0.05, 0.05]. Returns vertices, faces, and (F,) which sheet each face is on (0, 1, 2; -1: a turn)."""
+    path = [(-0.1 + 0.01 * k, 0.010) for k in range(14)]  # bottom, to x = 0.03
+    path += [(0.032, 0.0115)]
+    path += [(0.03 - 0.01 * k, 0.013) for k in range(7)]  # middle, back to x = -0.03
+    path += [(-0.032, 0.0145)]
+    path += [(-0.03 + 0.01 * k, 0.016) for k in range(14)]  # top, to x = 0.1
+    path = np.array(path)
+    sheet = np.array([0] * 13 + [-1, -1] + [1] * 6 + [-1, -1] + [2] * 13)  # per segment
+    ys = np.linspace(-0.05, 0.05, n_y + 1)
+    v = np.array([(x, y, z) for x, z in path for y in ys])
+    idx = np.arange(len(v)).reshape(len(path), n_y + 1)
+    faces, on = [], []
+    for s in range(len(path) - 1):
+        for j in range(n_y):
+            a, b, c, d = idx[s, j], idx[s + 1, j], idx[s + 1, j + 1], idx[s, j + 1]
+            faces += [(a, b, c), (a, c, d)]  # normal +z where the path runs along +x
+            on += [sheet[s]] * 2
+    return v, np.array(faces), np.array(on)
+
+
+def test_the_middle_sheet_of_a_fold_faces_the_body_and_nothing_else_does():
+    body_v, body_f = _box_body()
+    v, f, sheet = _z_fold()
+    anchors = BodyAnchors.build(v, ClosestPoint.build(body_v, body_f))
+    turned = anchors.reversed_faces(v, f, body_v, body_f)
+    assert turned[sheet == 1].all()
+    assert not turned[(sheet == 0) | (sheet == 2)].any()
+    # The same garment inside out: every flat face turned, the middle sheet not.
+    turned = anchors.reversed_faces(v, f[:, ::-1], body_v, body_f)
+    assert turned[(sheet == 0) | (sheet == 2)].all() and not turned[sheet == 1].any()
+
+
+def test_kept_queries_turn_the_sign_and_normal_over_on_reversed_faces_only():
+    v, f = _sheet(10, 0.2, 0.01)
+    mesh = ClosestPoint.build(v, f)
+    reversed_faces = np.zeros(len(f), dtype=bool)
+    reversed_faces[: len(f) // 2] = True
+    rng = np.random.default_rng(0)
+    x = rng.uniform([-0.1, -0.1, 0.0], [0.1, 0.1, 0.02], size=(200, 3))
+    kept = KeptQueries(mesh, len(x), reversed_faces)
+    signed, point, normal, rim = kept.at(x, np.arange(len(x)))
+    q = mesh.query(x)
+    sign = np.where(reversed_faces[q.face], -1.0, 1.0)
+    assert (sign < 0).any() and (sign > 0).any()
+    np.testing.assert_array_equal(signed, sign * q.signed)
+    np.testing.assert_array_equal(normal, sign[:, None] * q.normal)
+    np.testing.assert_array_equal(point, q.point)
+    np.testing.assert_array_equal(rim, mesh.on_boundary(q))
+
+
+def _points_layer(points: np.ndarray) -> Layer:
+    """A "garment" of tiny triangles, one at each point (its first corner)."""
+    tri = np.array([[0, 0, 0], [1e-4, 0, 0], [0, 1e-4, 0]])
+    v = (points[:, None] + tri[None]).reshape(-1, 3)
+    return Layer("outer", v, np.arange(len(v)).reshape(-1, 3))
+
+
+def test_penetration_reads_crossing_parity_where_the_closest_face_faces_the_body():
+    body = Layer("body", *_box_body())
+    # A garment worn inside out, 1 cm off the body: its normals point at the body.
+    inner = Layer("inner", *_sheet(10, 0.2, 0.01, inside_out=True))
+    # Over it; between it and the body (off the sheet's grid lines: a segment through an edge is no
+    # proper crossing).
+    points = np.array([[0.003, 0.004, 0.015], [0.023, 0.013, 0.005]])
+    outer = _points_layer(points)
+
+    def h_at(i, j):
+        return np.full(len(outer.vertices), -1.0)
+
+    every = np.ones(len(inner.faces), dtype=bool)
+    assert penetration([body, inner, outer], h_at, lambda i: every)["outer"] == 0.5  # the second point
+    # The face's own sign has it the other way round.
+    assert penetration([body, inner, outer], h_at)["outer"] == 0.5
+    plain = ClosestPoint.build(inner.vertices, inner.faces).query(points).signed
+    assert plain[0] < 0 < plain[1]
+    # Between a fold's middle sheet (facing the body) and its top sheet: two sheets under it, inside,
+    # though turning the middle sheet's sign over would say outside.
+    fold_v, fold_f, sheet = _z_fold()
+    fold = Layer("inner", fold_v, fold_f)
+    between = _points_layer(np.array([[0.003, 0.004, 0.0138], [0.003, 0.004, 0.0175]]))  # and over all
+    q = ClosestPoint.build(fold_v, fold_f).query(between.vertices[::3])
+    assert list(sheet[q.face]) == [1, 2]
+    assert penetration([body, fold, between], lambda i, j: np.full(6, -1.0), lambda i: sheet == 1)["outer"] == 0.5
+
+
+def test_the_repair_lifts_a_layer_off_a_garment_worn_inside_out_instead_of_through_it():
+    inner_v, inner_f = _sheet(20, 0.4, 0.01, inside_out=True)
+    outer_v, outer_f = _sheet(16, 0.3, 0.011)  # 1 mm over it: within the margin
+    n = len(outer_v)
+    every = np.ones(n, dtype=bool)
+    settings = RepairSettings()
+    mesh = ClosestPoint.build(inner_v, inner_f)
+    turned = Inner(mesh, False, every, every, reversed_faces=np.ones(len(inner_f), dtype=bool))
+    r = repair_layer(outer_v, outer_f, [turned], settings)
+    assert r.crossing_pairs == 0 and r.inside == 0
+    assert r.vertices[:, 2].min() >= 0.01 + 0.9 * settings.margin
+    # Read by the faces' own sign the layer is "inside" and goes down through the garment.
+    r = repair_layer(outer_v, outer_f, [Inner(mesh, False, every, every)], settings)
+    assert r.vertices[:, 2].min() < 0.01
+
+
+def test_the_repair_reports_where_its_faults_are_on_the_inner_layer():
+    inner_v, inner_f = _sheet(20, 0.4, 0.0)
+    outer_v, outer_f = _sheet(24, 0.36, 0.01)
+    dent = np.exp(-(outer_v[:, 0] ** 2 + outer_v[:, 1] ** 2) / 0.03**2)
+    outer_v[:, 2] -= 0.016 * dent  # 6 mm through the inner sheet
+    n = len(outer_v)
+    every = np.ones(n, dtype=bool)
+    mesh = ClosestPoint.build(inner_v, inner_f)
+    # Uncovered: only the crossings' vertices move, after the first round, so one round leaves faults.
+    nowhere = np.zeros(n, dtype=bool)
+    r = repair_layer(outer_v, outer_f, [Inner(mesh, False, every, nowhere)], RepairSettings(rounds=1))
+    crossing = intersecting_pairs(r.vertices, outer_f, inner_v, inner_f)
+    assert r.crossing_pairs == len(crossing) > 0
+    # The corners of every inner triangle crossed, and of those closest to vertices under the sheet.
+    crossed = set(inner_f[crossing[:, 1]].ravel())
+    under = mesh.query(r.vertices[mesh.query(r.vertices).signed < 0]).face
+    assert crossed <= set(r.faults[0]) <= crossed | set(inner_f[under].ravel())
+    done = repair_layer(outer_v, outer_f, [Inner(mesh, False, every, every)])
+    assert done.crossing_pairs == 0 and done.inside == 0 and len(done.faults[0]) == 0
+
+
+def test_a_vertex_with_a_larger_margin_is_pressed_that_much_deeper():
+    settings = SqueezeSettings()
+    body = ClosestPoint.build(*_sheet(30, 0.5, 0.0))
+    outer = ClosestPoint.build(*_sheet(24, 0.4, 0.02))
+    v, f = _sheet(20, 0.3, 0.03)
+    every = np.ones(len(v), dtype=bool)
+    margin = np.full(len(v), settings.margin)
+    deep = np.linalg.norm(v[:, :2], axis=1) < 0.05
+    margin[deep] = 0.006
+    squeeze = SqueezeSettings(ring=0, smoothing=0, relax=0)  # no spreading: each vertex where it was sent
+    r = squeeze_layer(v, f, [Outer(outer, every, every)], body, settings.margin, squeeze, margin=margin)
+    depth = 0.02 - r.vertices[:, 2]
+    np.testing.assert_allclose(depth[deep], 0.006, atol=1e-9)
+    np.testing.assert_allclose(depth[~deep], settings.margin, atol=1e-9)
+
+
+def test_a_pass_with_faults_deepens_the_squeeze_around_them_on_the_inner_garment():
+    v, f = grid_mesh(10)
+    deep = [np.full(len(v), 0.002), np.full(len(v), 0.002)]
+    pressed: dict = {}
+    faulty = RepairResult(v, np.zeros(len(v), dtype=bool), 1, 3, 0, [], [np.zeros(0, int), np.array([60])])
+    clean = RepairResult(v, np.zeros(len(v), dtype=bool), 1, 0, 0, [], [np.zeros(0, int)])
+    _deepen([clean, faulty], [f, f], deep, pressed)
+    # Garment 0 under garment 1, around its vertex 60 (DEEPEN_RING rings along the edges); garment 1
+    # untouched.
+    rings = np.zeros(len(v), dtype=bool)
+    rings[60] = True
+    edges = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+    for _ in range(DEEPEN_RING):
+        reached = rings[edges].any(axis=1)
+        rings[edges[reached].ravel()] = True
+    assert set(pressed) == {(0, 1)}
+    np.testing.assert_array_equal(pressed[(0, 1)], rings)
+    np.testing.assert_allclose(deep[0][rings], 0.002 + DEEPEN)
+    np.testing.assert_array_equal(deep[0][~rings], 0.002)
+    np.testing.assert_array_equal(deep[1], 0.002)
