@@ -25,10 +25,6 @@ DEEPEN = 0.002
 left them crossing (``_deepen``), up to ``DEEPEST``."""
 DEEPEST = 0.008
 DEEPEN_RING = 2
-PASS_PATIENCE = 2
-"""Passes without a new fewest count of faults after which the passes stop: an outfit the passes do not
-mend gets worse with each (a jacket under a T-shirt under a tank top: 211, 1,309, 3,222, 6,500 crossing
-pairs after passes 1-4), and each pass of four garments costs seconds."""
 BODY_QUERY_PAD = 0.01
 """m: garment vertices the body's canonical distance puts farther out than the repair's largest margin
 plus this are not asked for their
@@ -76,10 +72,8 @@ def untangle_world(models, layer_ids, beta, body, explicit, fitted, world, faces
         # long before a crossing pair is.
         faults = (sum(r.crossing_pairs for r in results), sum(r.inside for r in results))
         if best is None or faults < best[0]:
-            best, since_best = (faults, out, results), 0
-        else:
-            since_best += 1
-        if faults == (0, 0) or since_best >= PASS_PATIENCE:
+            best = (faults, out, results)
+        if faults == (0, 0):
             break
         _deepen(results, faces, deep, pressed)
         start = out
