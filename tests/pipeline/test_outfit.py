@@ -185,16 +185,18 @@ def test_a_long_top_tucked_into_pants_is_gathered_above_their_crotch(models, hel
     # The jacket's hem hangs below the pants' crotch: it is gathered up above it
     # (service.pipeline.junctions.raising), the pants keep their crotch, and the pair comes out clean
     # by issue 21's measure (no crossing pair, at most 0.1 % of a garment's vertices inside: 0.00 % when
-    # this was written). Without the gathering it is not: 15 crossing pairs (16 with three untangling
-    # passes; 0 pairs but 0.12 % inside in a tree whose far-field bounds were 4 mm tighter).
+    # this was written). Without the gathering it was not (15 crossing pairs) until the repair turned
+    # over the faces of a fold that face the body (issue 21's seventh round): now it is clean either way
+    # on this body, so the test checks that the gathering is what the jacket gets, not that it is needed.
     ids = ["jacket", "pants"]
     assert models.raising(*ids) is not None and models.lowering(*ids) is None
-    r = make_outfit(models, ids, held_out_beta, measure=True).report
-    pairs, inside = _tangle(r, "after")
+    outfit = make_outfit(models, ids, held_out_beta, measure=True)
+    pairs, inside = _tangle(outfit.report, "after")
     assert pairs == 0 and inside <= PENETRATION_LIMIT / 100
     monkeypatch.setattr(models, "raising", lambda inner, outer: None)
-    pairs, inside = _tangle(make_outfit(models, ids, held_out_beta, measure=True).report, "after")
-    assert pairs > 0 or inside > PENETRATION_LIMIT / 100
+    plain = make_outfit(models, ids, held_out_beta, measure=False)
+    jacket, jacket_plain = outfit.garments[0][1], plain.garments[0][1]
+    assert np.abs(jacket - jacket_plain).max() > 0.01  # the gathering moved the hem by centimetres
 
 
 def test_garments_worn_the_usual_way_are_not_let_down(models):
