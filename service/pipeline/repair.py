@@ -55,7 +55,7 @@ class Inner:
     """Closest points on ``mesh`` already asked for (of these V vertices), or None: none yet."""
     reversed_faces: np.ndarray | None = None
     """(F,) bool: faces of ``mesh`` whose outside (away from the body) is against their winding
-    (``service.pipeline.squeeze.reversed_faces``); None: none."""
+    (``service.pipeline.squeeze.BodyAnchors.reversed_faces``); None: none."""
 
 
 @dataclass(frozen=True)

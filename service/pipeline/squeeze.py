@@ -39,6 +39,7 @@ import numpy as np
 
 from service.geometry.closest import ClosestPoint, KeptQueries
 from service.geometry.intersections import TriangleGrid, segment_crossings
+from service.geometry.mesh import face_normals
 from service.pipeline.fit import dilate, vertex_neighbours
 from service.pipeline.quality import PENETRATION_BAND
 from service.pipeline.repair import diffuse
@@ -104,11 +105,8 @@ class BodyAnchors:
         Z-fold, seen from above, says "inside" where a vertex is over it. A layer pushed out along it
         went into the body: a tank top over a jacket's chest fold, pushed back and forth between the
         two for 24 rounds."""
-        b = body_vertices[body_faces[self.face]]  # (V, 3, 3)
-        body_normal = np.cross(b[:, 1] - b[:, 0], b[:, 2] - b[:, 0])
-        body_normal /= np.maximum(np.linalg.norm(body_normal, axis=1, keepdims=True), 1e-30)
-        t = vertices[faces]
-        normal = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
+        body_normal = face_normals(body_vertices, body_faces)[self.face]  # (V, 3) at each anchor
+        normal = face_normals(vertices, faces, normalize=False)
         return np.einsum("fx,fx->f", normal, body_normal[faces].sum(axis=1)) < 0
 
 
