@@ -142,6 +142,11 @@ class SqueezeSettings:
     ring: int = 3
     smoothing: int = 12
     rounds: int = 8
+    past_rim: bool = False
+    """A vertex whose closest point on the outer layer is on its rim is past its opening, not under it
+    (the repair's rule), unless the segment test finds it under: the fields, read where the fit left
+    the vertex, can still call it covered (a jacket's cloth 5 cm past a T-shirt's armhole was pulled
+    10 cm). Off by default: it is the second way ``service.pipeline.world_untangle`` tries."""
     relax: int = 4
     """Jacobi iterations over the whole moved patch, pulled vertices included, after the diffusion:
     neighbours pulled towards different sides of an armpit (torso and arm) otherwise part ways and
@@ -174,10 +179,13 @@ def _pulls(x: np.ndarray, outer: Outer, kept: KeptQueries, body: KeptQueries, fl
     cand = np.flatnonzero(outer.near & outer.covered)
     if not len(cand):
         return cand, np.zeros((0, 3))
-    signed_out = kept.at(x, cand)[0]
+    signed_out, _, _, rim = kept.at(x, cand)
     far = outer.beyond[cand] if outer.beyond is not None else np.zeros(len(cand), dtype=bool)
+    under = signed_out < settings.band
+    if settings.past_rim:
+        under &= ~rim
     # 10 % slack, as in the repair: a vertex pulled to the margin lands a rounding error short of it.
-    bad = (signed_out > -0.9 * margin[cand]) & ((signed_out < settings.band) | far)
+    bad = (signed_out > -0.9 * margin[cand]) & (under | far)
     idx = cand[bad]
     if not len(idx):
         return idx, np.zeros((0, 3))

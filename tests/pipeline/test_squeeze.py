@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from service.geometry.closest import ClosestPoint
@@ -138,3 +140,21 @@ def test_the_segment_test_is_asked_for_looser_tops_and_for_tops_tucked_into_legg
         ("shorts", "tank_top"), ("jacket", "skirt"), ("tshirt", "skirt"), ("tank_top", "pants"),
     }  # fmt: skip
     assert not not_asked & asked
+
+
+def test_with_past_rim_cloth_beyond_the_outer_layers_rim_is_not_pulled_under_it():
+    # The fields call the whole inner sheet covered; the outer sheet ends at |x|, |y| = 0.1.
+    body = ClosestPoint.build(*_sheet(30, 0.6, 0.0))
+    outer = ClosestPoint.build(*_sheet(24, 0.2, 0.01))
+    v, f = _sheet(40, 0.3, 0.015)
+    every = np.ones(len(v), dtype=bool)
+    plain = SqueezeSettings(ring=0, smoothing=0, relax=0)  # no spreading: only the pulled vertices move
+    past = np.abs(v[:, :2]).max(axis=1) > 0.1
+    layer = [Outer(outer, every, every)]
+    default = squeeze_layer(v, f, layer, body, plain.margin, plain)
+    rim = squeeze_layer(v, f, layer, body, plain.margin, replace(plain, past_rim=True))
+    assert default.moved[past].any()
+    assert not rim.moved[past].any()
+    # Under the outer layer both press the cloth to the margin.
+    assert np.all(rim.vertices[~past, 2] <= 0.01 - 0.9 * plain.margin)
+    np.testing.assert_allclose(rim.vertices[~past], default.vertices[~past], atol=1e-12)
