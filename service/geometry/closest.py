@@ -160,11 +160,13 @@ class ClosestPoint:
 
     @cached_property
     def boxes(self) -> tuple:
-        """The hierarchy of ``bvh_kernel`` over this mesh: (corners (F, 3, 3) in leaf order, lo (N, 3),
-        hi (N, 3), left (N,), start (N,), count (N,), order (F,))."""
+        """The hierarchy of ``bvh_kernel`` over this mesh: (corners (F, 3, 3) in leaf order, the triangles'
+        boxes tlo (F, 3), thi (F, 3), the nodes' lo (N, 3), hi (N, 3), left (N,), start (N,), count (N,),
+        order (F,))."""
         left, start, count, order = _hierarchy(self.topology, self.faces, self.vertices)
         tri = bvh_kernel.corners(self.vertices, self.faces, order)
-        return (tri, *bvh_kernel.boxes(tri, left, start, count), left, start, count, order)
+        return (tri, *bvh_kernel.triangle_boxes(tri), *bvh_kernel.boxes(tri, left, start, count), left, start,
+                count, order)  # fmt: skip
 
     @cached_property
     def fn(self) -> np.ndarray:

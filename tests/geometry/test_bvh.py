@@ -27,6 +27,8 @@ def test_every_triangle_sits_in_one_leaf_and_every_box_holds_its_triangles():
     tri = bvh_kernel.corners(v, f, order)
     np.testing.assert_array_equal(tri, v[f[order]])
     lo, hi = bvh_kernel.boxes(tri, left, start, count)
+    tlo, thi = bvh_kernel.triangle_boxes(tri)
+    assert np.all(tri > tlo[:, None]) and np.all(tri < thi[:, None])
     for n in np.flatnonzero(leaves):
         corners = tri[start[n] : start[n] + count[n]].reshape(-1, 3)
         assert np.all(corners > lo[n]) and np.all(corners < hi[n])
