@@ -197,15 +197,20 @@ def repair_layer(
     # around those (the rest of a body never changes between rounds).
     tested = [np.flatnonzero(layer.near[faces].any(axis=1)) for layer in inner]
 
-    def grid(n: int) -> tuple[TriangleGrid, np.ndarray]:
-        corners = np.zeros(len(x), dtype=bool)  # the tested triangles' corners: the same bounding box
-        corners[faces[tested[n]].ravel()] = True
-        around = _faces_around(inner[n].mesh, x[corners], settings.band)
+    def grid(n: int, points: np.ndarray) -> tuple[TriangleGrid, np.ndarray]:
+        around = _faces_around(inner[n].mesh, points, settings.band)
         return TriangleGrid.build(inner[n].mesh.vertices, inner[n].mesh.faces[around]), around
 
-    # One grid per inner layer, built side by side (its cell lists are compiled and release the GIL).
-    built = [grid(0)] if len(inner) == 1 else list(pool("grids", 2).map(grid, range(len(inner))))
-    grids = [g for g, _ in built]
+    def corners(n: int) -> np.ndarray:
+        """The tested triangles' corners as they are now (a copy: the rounds move ``x``)."""
+        used = np.zeros(len(x), dtype=bool)
+        used[faces[tested[n]].ravel()] = True
+        return x[used]
+
+    # One grid per inner layer, built side by side on their own threads (the cell lists are compiled and
+    # release the GIL) while the first round's pushes run: the crossing tests are the first to need them.
+    pending = [pool("grids", 2).submit(grid, n, corners(n)) for n in range(len(inner))]
+    built = None
     queries = [KeptQueries(layer.mesh, len(x), layer.reversed_faces) if layer.kept is None else layer.kept
                for layer in inner]  # fmt: skip
     # Crossing pairs (tested triangle, inner triangle) of each layer, and the vertices they were
@@ -248,6 +253,9 @@ def repair_layer(
             u = diffuse(u, held, region, adjacency, settings.smoothing)
             x += u
         crossing, culprits = 0, []
+        if built is None:
+            built = [p.result() for p in pending]
+            grids = [g for g, _ in built]
         moved = np.any(x != tested_at, axis=1)
         tested_at = x.copy()
         for n, (t, grid) in enumerate(zip(tested, grids, strict=True)):
@@ -265,6 +273,8 @@ def repair_layer(
             forced[worse] = True
             margin[worse] = np.minimum(settings.growth * margin[worse], settings.max_margin)
             kick[worse] = settings.margin
+    if built is None:  # no round ran
+        built = [p.result() for p in pending]
     places = [(h[:, 1].copy(), w) for h, w in zip(hits, inside_at, strict=True)]
     if crossing + inside > best[0]:  # stopped while oscillating: return the round with the fewest faults
         _, x, crossing, inside, _, places = best

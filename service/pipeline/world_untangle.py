@@ -181,7 +181,7 @@ def _repair(models, layer_ids, beta, body: ClosestPoint, explicit, fitted, fit_w
     squeeze (or an earlier pass) moved by d since is looked for within d more, so that the crossings
     left that the repair counts are never fewer than the returned meshes have (a loose sleeve walked
     5 cm to its anchor can end inside the arm)."""
-    inner = [(body, True, 0.0)]
+    inner = [(body, True, 0.0, None)]
     out, results = [], []
     # The body never moves, and every layer's first pushes ask it about the layer's vertices where
     # the squeeze left them: those queries go in one batch, which the query's blocks spread over both
@@ -199,15 +199,13 @@ def _repair(models, layer_ids, beta, body: ClosestPoint, explicit, fitted, fit_w
     kept_body = _asked_together(body, world, [np.flatnonzero(near & query) for near, query in masks])
     for i, (x, f) in enumerate(zip(world, faces, strict=True)):
         layers = []
-        for k, (mesh, closed, moved) in enumerate(inner):
+        for k, (mesh, closed, moved, turned) in enumerate(inner):
             if closed:
                 near, query = masks[i]
                 layers.append(Inner(mesh, True, near, np.ones(len(x), dtype=bool), query, kept_body[i]))
                 continue
             f_k, h_k = _field_at(models, layer_ids, beta, fitted, k, i)
             near = np.abs(f_k) < REACH + moved + own[i]
-            turned = models.anchors(layer_ids[k]).reversed_faces(mesh.vertices, mesh.faces, body.vertices,
-                                                                 body.faces)  # fmt: skip
             layers.append(Inner(mesh, closed, near, h_k < 0, reversed_faces=turned))
         r = repair_layer(x, f, layers, settings)
         out.append(r.vertices if np.all(np.isfinite(r.vertices)) else x)
@@ -218,7 +216,11 @@ def _repair(models, layer_ids, beta, body: ClosestPoint, explicit, fitted, fit_w
         fit_move = float(np.linalg.norm(fitted[0][i] - explicit[i], axis=1).max())
         moved = 1.2 * fit_move + float(np.linalg.norm(out[-1] - fit_world[i], axis=1).max())
         moved += 1.2 * lowered[i]  # its fields are of the mesh before it was let down
-        inner.append((ClosestPoint.build(out[-1], f), False, moved))
+        if i == len(world) - 1:
+            break  # no layer over it
+        # Its faces turned against the body, the same for every layer over it.
+        turned = models.anchors(layer_ids[i + 1]).reversed_faces(out[-1], f, body.vertices, body.faces)
+        inner.append((ClosestPoint.build(out[-1], f), False, moved, turned))
     return out, results
 
 
