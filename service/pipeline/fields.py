@@ -69,12 +69,17 @@ class FieldValues(NamedTuple):
     grad_h: np.ndarray | None
 
 
-BATCH = 8192  # points per onnxruntime call of the values graph
-GRADIENT_BATCH = 4096
-"""Points per call of the gradient graph, whose activations are several times the values graph's: at
-8,192 its buffers outgrew what ``service.process.tuning`` keeps in the heap and every call page-faulted ~28 MB
-in again (a jacket field with gradients at 30,000 points, 2 threads: 90 ms in calls of 8,192, 53 ms in
-calls of 4,096; 2,048 to 6,144 all took 49-57 ms)."""
+BATCH = 1024
+"""Points per onnxruntime call of the values graph. A batch's activations (1,024 x 96 floats a layer,
+0.4 MB) stay in a core's cache: per point, the T-shirt's values graph on one thread takes 0.47 us in
+calls of 1,024 against 0.55 in calls of 8,192, its grad f graph 1.07 against 1.39 (4,096) and the full
+gradient graph 1.47 against 1.84, most of that in the element-wise products of the slopes (a one-off
+timing; ``benchmarks.latency``'s field line is the rerunnable measure). A point's answer does not
+depend on its batch."""
+GRADIENT_BATCH = 1024
+"""Points per call of the gradient graphs (``BATCH``). They also bound the activations' memory: at 8,192
+the full gradient graph's buffers outgrew what ``service.process.tuning`` keeps in the heap and every call
+page-faulted ~28 MB in again."""
 
 
 class NeuralField:
