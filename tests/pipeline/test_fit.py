@@ -202,7 +202,8 @@ def test_far_layers_are_never_asked_for_gradients_and_do_not_change_the_fit():
     np.testing.assert_allclose(with_far.vertices, alone.vertices, atol=1e-12)
 
 
-def test_a_layer_the_bounds_put_far_is_never_asked_and_the_fit_is_the_same():
+@pytest.mark.parametrize("refresh", ["linear", "fields"])
+def test_a_layer_the_bounds_put_far_is_never_asked_and_the_fit_is_the_same(refresh):
     """Where ``bounds`` put a layer ``FAR_FIELD`` away, its field is not asked (values or gradients),
     the fit returns the bound and ``INACTIVE`` there, and the fit is the one that asked everywhere
     (the layer is beyond ``reach`` either way); where they do not, it is asked."""
@@ -219,13 +220,15 @@ def test_a_layer_the_bounds_put_far_is_never_asked_and_the_fit_is_the_same():
     bounds = np.zeros((len(v), 3))
     far = np.arange(len(v)) % 3 > 0  # two thirds of the vertices know layer 2 is far
     bounds[far, 2] = FAR_FIELD + 0.01
-    res = fit_garment(v, f, 1, 3, fields, reference, bounds=bounds)
+    settings = FitSettings(refresh=refresh)
+    res = fit_garment(v, f, 1, 3, fields, reference, settings, bounds=bounds)
     with_bounds, asked[:] = list(asked), []
-    every = fit_garment(v, f, 1, 3, fields, reference)
+    every = fit_garment(v, f, 1, 3, fields, reference, settings)
     np.testing.assert_array_equal(res.vertices, every.vertices)
-    # Before and after the step, at the vertices not known far only.
-    assert [n for k, n in with_bounds if k == 2] == [(~far).sum()] * 2
-    assert [n for k, n in asked if k == 2] == [len(v)] * 2
+    # Before the step (and after it, re-evaluated), at the vertices not known far only.
+    calls = 2 if refresh == "fields" else 1
+    assert [n for k, n in with_bounds if k == 2] == [(~far).sum()] * calls
+    assert [n for k, n in asked if k == 2] == [len(v)] * calls
     moved = np.linalg.norm(res.vertices - v, axis=1)  # a bound holds less how far the vertex moved
     assert moved[far].max() > 0.001
     np.testing.assert_allclose(res.values[0][far, 2], FAR_FIELD + 0.01 - moved[far], rtol=0, atol=1e-15)
@@ -255,6 +258,34 @@ def test_the_values_a_fit_returns_are_the_fields_at_its_vertices():
     # With the network's own field, that column is the field's too.
     res = fit_garment(v, f, 2, 3, fields, reference, FitSettings(own_field="network"))
     np.testing.assert_allclose(res.values[0][:, 2], fields(2, res.vertices, False).f, atol=1e-15)
+
+
+def test_the_linear_values_are_the_fields_to_second_order_in_the_step():
+    """``refresh="linear"`` returns the same vertices as asking the fields again, and values that differ
+    from theirs by no more than the fields' curvature allows: over a ball of radius R (f = |x| - R,
+    curvature 1 / |x| <= 1 / R), by at most |d|^2 / (2 R) for a step d."""
+    radius = 0.1
+    v, f = _sheet(n=8, z=radius + 0.002, size=0.06)  # a flat sheet 2 mm over the top of the ball
+
+    def fields(k, x, gradient):
+        if k != 0:
+            return planes([0.0, radius + 0.002])(k, x, gradient)
+        r = np.linalg.norm(x, axis=1)
+        h = np.full(len(x), -1.0)
+        if not gradient:
+            return FieldValues(r - radius, h, None, None)
+        return FieldValues(r - radius, h, x / r[:, None], np.zeros_like(x))
+
+    lin = fit_garment(v, f, 1, 2, fields, reference, FitSettings(refresh="linear"))
+    ref = fit_garment(v, f, 1, 2, fields, reference, FitSettings(refresh="fields"))
+    np.testing.assert_array_equal(lin.vertices, ref.vertices)
+    step = np.linalg.norm(lin.vertices - v, axis=1)
+    assert step.max() > 0.001  # the fit moved them, along the ball's normal and across it
+    gap = np.abs(lin.values[0][:, 0] - ref.values[0][:, 0])
+    assert 0 < gap.max() <= (step**2).max() / (2 * radius)
+    np.testing.assert_array_less(gap, step**2 / (2 * radius) + 1e-15)
+    np.testing.assert_array_equal(lin.values[1], ref.values[1])
+    assert abs(lin.residual_after - ref.residual_after) <= (step**2).max() / (2 * radius)
 
 
 def test_the_own_field_from_the_mesh_is_the_distance_to_the_tangent_plane_and_never_runs_its_network():
