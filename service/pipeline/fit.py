@@ -107,9 +107,10 @@ class FitSettings:
     (``OwnField``) or its network, as for the other layers."""
     refresh: Literal["linear", "fields"] = "linear"
     """Where the values at the fitted vertices (``FitResult.values``, ``residual_after``) come from after
-    a linearisation's L-BFGS run: its linear model (``_moved_values``; the residual the L-BFGS reached),
-    or the networks asked again at the moved vertices (the reference; ~12 % of the fit's time for body
-    + 4 garments, and with ``outer`` > 1 the next linearisation starts from them)."""
+    the last linearisation's L-BFGS run: its linear model for the layers within reach, the networks for
+    the others (``_moved_values``; the residual the L-BFGS reached), or the networks for every layer (the
+    reference; with ``outer`` > 1 the next linearisations start from them). The networks asked again
+    took ~12 % of the fit's time for body + 4 garments."""
 
 
 @dataclass(frozen=True)
@@ -264,11 +265,18 @@ def fit_garment(
         if settings.refresh == "linear" and linearisations == settings.outer:
             # The last linearisation: the values and the residual at the fitted vertices from its model.
             far = far_layers(f_star[idx], layer, settings.reach)  # as _linearise had them
-            f_star[idx], h_raw[idx] = _moved_values(lin, far, h_raw[idx], y - x[idx],
-                                                    None if own is None else (layer, own.at(idx, y)))  # fmt: skip
-            h_star[idx] = np.where(far_layers(f_star[idx], layer, settings.reach), INACTIVE, h_raw[idx])
-            residual[idx] = r0 + np.einsum("nd,nd->n", g, y - x[idx])
+            d = y - x[idx]
             x[idx] = y
+            left = None if bounds is None else bounds[idx] - np.linalg.norm(y - x0[idx], axis=1)[:, None]
+            with clock("fields"):
+                f_new, h_new = _moved_values(fields, lin, far, y, d,
+                                             None if own is None else (layer, own.at(idx, y)), left)  # fmt: skip
+            if not (np.all(np.isfinite(f_new)) and np.all(np.isfinite(h_new))):
+                ok = False
+                break
+            f_star[idx], h_raw[idx] = f_new, h_new
+            h_star[idx] = np.where(far_layers(f_new, layer, settings.reach), INACTIVE, h_new)
+            residual[idx] = r0 + np.einsum("nd,nd->n", g, d)
             break
         x[idx] = y
         with clock("fields"):
@@ -352,20 +360,27 @@ def _linearise(fields: LayerFields, n_layers: int, x: np.ndarray, f_now: np.ndar
     return fl, hl, grad_f, grad_h
 
 
-def _moved_values(lin, far: np.ndarray, h_then: np.ndarray, d: np.ndarray,
-                  own: tuple[int, FieldValues] | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """f*, h* ``(P, N)`` at points moved by ``d (P, 3)`` from the linearisation point of ``lin``
-    (``_linearise``'s (f*, h*, grad f*, grad h*)), from its first-order model: what the fit's L-BFGS
-    assumed (``FitSettings.refresh = "linear"``). A layer ``far (P, N)`` (``far_layers``, as the
-    linearisation had them) has no gradient there: its h* stays ``h_then (P, N)`` (the networks' answer before the move) and its f* moves
-    towards 0 by the step's length (the field changes no faster than the point, ~1 per m: a lower bound on
-    the distance, as the later stages read it). ``own``: (the fitted layer, its exact values at the
-    moved points, ``OwnField``)."""
-    f_then, h_lin, grad_f, grad_h = lin
-    f = f_then + np.einsum("pkd,pd->pk", grad_f, d)
-    h = np.where(far, h_then, h_lin + np.einsum("pkd,pd->pk", grad_h, d))
-    step = np.linalg.norm(d, axis=1)[:, None]
-    f = np.where(far, np.sign(f_then) * np.maximum(np.abs(f_then) - step, 0.0), f)
+def _moved_values(fields: LayerFields, lin, far: np.ndarray, y: np.ndarray, d: np.ndarray,
+                  own: tuple[int, FieldValues] | None = None,
+                  bounds: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """f*, h* ``(P, N)`` at the points ``y (P, 3)``, moved by ``d (P, 3)`` from the linearisation point of
+    ``lin`` (``_linearise``'s (f*, h*, grad f*, grad h*)): of the layers within reach there, from that
+    first-order model, which the fit's L-BFGS assumed (``FitSettings.refresh = "linear"``); of the layers
+    ``far (P, N)`` put beyond reach (``far_layers``, as the linearisation had them), which have no gradient,
+    the networks' values at y (``_values``, with the ``bounds (P, N)`` at y). Far from a garment its learned
+    field is no distance: the skirt's at a long sleeve's vertices changed by up to 8 cm for a step of 2,
+    and a first-order guess there changed which vertices the repair checks. ``own``: (the fitted layer,
+    its exact values at y, ``OwnField``)."""
+    f_lin, h_lin, grad_f, grad_h = lin
+    f = f_lin + np.einsum("pkd,pd->pk", grad_f, d)
+    h = h_lin + np.einsum("pkd,pd->pk", grad_h, d)
+    for k in range(f.shape[1]):
+        ask = np.flatnonzero(far[:, k])
+        if not len(ask):
+            continue
+        b = None if bounds is None else bounds[ask][:, [k]]
+        one = _values(lambda _, x, gradient: fields(k, x, gradient), 1, y[ask], None, b)
+        f[ask, k], h[ask, k] = one[0][:, 0], one[1][:, 0]
     if own is not None:
         f[:, own[0]], h[:, own[0]] = own[1].f, own[1].h
     return f, h
