@@ -269,8 +269,8 @@ def fit_garment(
             x[idx] = y
             left = None if bounds is None else bounds[idx] - np.linalg.norm(y - x0[idx], axis=1)[:, None]
             with clock("fields"):
-                f_new, h_new = _moved_values(fields, lin, far, y, d,
-                                             None if own is None else (layer, own.at(idx, y)), left)  # fmt: skip
+                known = None if own is None else (layer, own.at(idx, y))
+                f_new, h_new = _moved_values(fields, lin, far, y, d, known, left)
             if not (np.all(np.isfinite(f_new)) and np.all(np.isfinite(h_new))):
                 ok = False
                 break
@@ -379,7 +379,7 @@ def _moved_values(fields: LayerFields, lin, far: np.ndarray, y: np.ndarray, d: n
         if not len(ask):
             continue
         b = None if bounds is None else bounds[ask][:, [k]]
-        one = _values(lambda _, x, gradient: fields(k, x, gradient), 1, y[ask], None, b)
+        one = _values(lambda _, x, gradient, k=k: fields(k, x, gradient), 1, y[ask], None, b)
         f[ask, k], h[ask, k] = one[0][:, 0], one[1][:, 0]
     if own is not None:
         f[:, own[0]], h[:, own[0]] = own[1].f, own[1].h
