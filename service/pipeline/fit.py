@@ -365,7 +365,8 @@ def _moved_values(fields: LayerFields, lin, far: np.ndarray, y: np.ndarray, d: n
                   bounds: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
     """f*, h* ``(P, N)`` at the points ``y (P, 3)``, moved by ``d (P, 3)`` from the linearisation point of
     ``lin`` (``_linearise``'s (f*, h*, grad f*, grad h*)): of the layers within reach there, from that
-    first-order model, which the fit's L-BFGS assumed (``FitSettings.refresh = "linear"``); of the layers
+    first-order model, which the fit's L-BFGS assumed (``FitSettings.refresh = "linear"``; h* keeps its
+    value where ``_linearise`` did not ask grad h*, outside the untangler's band); of the layers
     ``far (P, N)`` put beyond reach (``far_layers``, as the linearisation had them), which have no gradient,
     the networks' values at y (``_values``, with the ``bounds (P, N)`` at y). Far from a garment its learned
     field is no distance: the skirt's at a long sleeve's vertices changed by up to 8 cm for a step of 2,
