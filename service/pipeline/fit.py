@@ -262,34 +262,28 @@ def fit_garment(
         linearisations += 1
         if not ok:
             break
-        if settings.refresh == "linear" and linearisations == settings.outer:
-            # The last linearisation: the values and the residual at the fitted vertices from its model.
-            far = far_layers(f_star[idx], layer, settings.reach)  # as _linearise had them
-            d = y - x[idx]
-            x[idx] = y
-            left = None if bounds is None else bounds[idx] - np.linalg.norm(y - x0[idx], axis=1)[:, None]
-            with clock("fields"):
-                known = None if own is None else (layer, own.at(idx, y))
-                f_new, h_new = _moved_values(fields, lin, far, y, d, known, left)
-            if not (np.all(np.isfinite(f_new)) and np.all(np.isfinite(h_new))):
-                ok = False
-                break
-            f_star[idx], h_raw[idx] = f_new, h_new
-            h_star[idx] = np.where(far_layers(f_new, layer, settings.reach), INACTIVE, h_new)
-            residual[idx] = r0 + np.einsum("nd,nd->n", g, d)
-            break
+        # After the last linearisation with refresh "linear": the values and the residual at the fitted
+        # vertices from its model.
+        linear = settings.refresh == "linear" and linearisations == settings.outer
+        far = far_layers(f_star[idx], layer, settings.reach)  # as _linearise had them
+        d = y - x[idx]
         x[idx] = y
         with clock("fields"):
             # A bound at the explicit vertex holds less how far the fit has moved it since.
-            left = None if bounds is None else bounds[idx] - np.linalg.norm(x[idx] - x0[idx], axis=1)[:, None]
-            f_new, h_new = _values(
-                fields, n_layers, x[idx], None if own is None else (layer, own.at(idx, x[idx])), left
-            )
+            left = None if bounds is None else bounds[idx] - np.linalg.norm(y - x0[idx], axis=1)[:, None]
+            known = None if own is None else (layer, own.at(idx, y))
+            if linear:
+                f_new, h_new = _moved_values(fields, lin, far, y, d, known, left)
+            else:
+                f_new, h_new = _values(fields, n_layers, y, known, left)
         if not (np.all(np.isfinite(f_new)) and np.all(np.isfinite(h_new))):
             ok = False
             break
         f_star[idx], h_raw[idx] = f_new, h_new
         h_star[idx] = np.where(far_layers(f_new, layer, settings.reach), INACTIVE, h_new)
+        if linear:
+            residual[idx] = r0 + np.einsum("nd,nd->n", g, d)
+            break
         with clock("untangle"):
             residual[idx] = untangler(f_star[idx], h_star[idx], False)[0][:, layer] - target[idx]
     values = (f_star, h_raw) if ok else None
