@@ -12,6 +12,7 @@ triangles around a point's nearest vertices) serves the canonical space's body m
 from __future__ import annotations
 
 import threading
+from concurrent.futures import Future
 from dataclasses import dataclass, fields
 from functools import cached_property
 
@@ -238,17 +239,18 @@ class ClosestPoint:
         np.put_along_axis(d, order, d_unique[slot], 1)
         return cand, w, np.where(valid, d, np.inf)
 
-    def query(self, points: np.ndarray) -> Closest:
+    def query(self, points: np.ndarray, split: bool = True) -> Closest:
         """Closest points of ``points (N, 3)`` on the mesh: ``query_reference`` bit for bit.
 
         From ``MIN_SPLIT`` points, blocks of about ``QUERY_BLOCK`` run on ``QUERY_THREADS`` threads (the
         compiled search releases the GIL; each point's answer depends on that point
         alone, so the result is the same bit for bit): the repair's and the squeeze's queries are most
         of a request's time. The blocks are as many as the threads or a multiple, so that none idles
-        at the end.
+        at the end. ``split=False`` answers on the caller's thread alone (a query asked ahead, in the
+        background, which should not take the threads from the queries that are waited for).
         """
         points = _check_points(points)
-        if len(points) < MIN_SPLIT or QUERY_THREADS <= 1:
+        if len(points) < MIN_SPLIT or QUERY_THREADS <= 1 or not split:
             return self._query_block(points)
         # Build the lazy structures here: cached_property is not safe to fill from two threads.
         _ = self.topology, self.boxes, self.fn, self.pseudo
@@ -313,15 +315,15 @@ class KeptQueries:
         self.normal = np.zeros((n, 3))
         self.rim = np.zeros(n, dtype=bool)
 
-    def at(self, x: np.ndarray, ask: np.ndarray):
+    def at(self, x: np.ndarray, ask: np.ndarray, split: bool = True):
         """(signed distance (K,), closest point (K, 3), face normal (K, 3), closest point on the mesh's
         rim (K,) bool) at the points ``ask (K,)`` of ``x (n, 3)``, querying only those that moved since
-        they were last asked."""
+        they were last asked (``ClosestPoint.query``'s ``split``)."""
         ask = np.ascontiguousarray(ask, dtype=np.int64)
         stale = np.empty(len(ask), dtype=np.int64)
         stale = stale[: _moved(np.ascontiguousarray(x, dtype=np.float64), self.points, ask, stale)]
         if len(stale):
-            self.store(x, stale, self.mesh.query(x[stale]))
+            self.store(x, stale, self.mesh.query(x[stale], split))
         return self.signed[ask], self.point[ask], self.normal[ask], self.rim[ask]
 
     def store(self, x: np.ndarray, idx: np.ndarray, q: Closest) -> None:
@@ -334,6 +336,18 @@ class KeptQueries:
             turned = idx[self.reversed[q.face]]
             self.signed[turned] *= -1
             self.normal[turned] *= -1
+
+
+def ask_ahead(kept: KeptQueries, x: np.ndarray, ask: np.ndarray) -> Future:
+    """Ask ``kept``'s mesh for the points ``ask (K,)`` of ``x (n, 3)`` on a background thread, before the
+    caller needs them; the caller waits for the returned future before it reads ``kept`` (and leaves
+    ``x`` unchanged until then). The answers are the ones ``kept.at`` gives on the caller's thread, bit
+    for bit (a function of the point alone): only when they are computed changes. The world-space
+    squeeze and repair ask ahead for the layers they reach two or more layers later, while the second
+    core would otherwise wait on their numpy and Python work."""
+    mesh = kept.mesh
+    _ = mesh.topology, mesh.boxes, mesh.fn, mesh.pseudo  # built here: cached_property is not thread-safe
+    return pool("ask ahead", 1).submit(kept.at, x, ask, False)
 
 
 @njit(cache=True, nogil=True)

@@ -59,6 +59,9 @@ class Outer:
     """Whether the segment test is asked for the inner garment under this one (``asks_segment_test``).
     Worn the usual way, the field's cover is right, and the test's anchor walks cost time and left 9
     crossing pairs in four tops on a short, heavy body."""
+    kept: KeptQueries | None = None
+    """Closest points on ``mesh`` already asked for (of the inner garment's V vertices), or None: none
+    yet (``service.pipeline.world_untangle`` asks ahead)."""
 
 
 def asks_segment_test(inner, outer, holds_legs_apart) -> bool:
@@ -249,7 +252,7 @@ def squeeze_layer(
     x0 = np.asarray(vertices, dtype=np.float64)
     margin = np.full(len(x0), settings.margin) if margin is None else np.asarray(margin, dtype=np.float64)
     x = x0.copy()
-    kept = [KeptQueries(layer.mesh, len(x)) for layer in outer]
+    kept = [KeptQueries(layer.mesh, len(x)) if layer.kept is None else layer.kept for layer in outer]
     if anchors is not None:  # the caller's layers stay as they were
         outer = [
             replace(layer, beyond=(b := beyond(x0, anchors, layer, queries)),

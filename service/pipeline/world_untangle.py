@@ -9,16 +9,20 @@ vertices can be near a layer, and where it covers them, comes from the fields at
 
 from __future__ import annotations
 
+from concurrent.futures import Future
 from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
 
-from service.geometry.closest import Closest, ClosestPoint, KeptQueries
+from service.geometry.closest import Closest, ClosestPoint, KeptQueries, ask_ahead
 from service.pipeline.fit import dilate, vertex_neighbours
 from service.pipeline.repair import REACH, Inner, RepairSettings, repair_layer
 from service.pipeline.squeeze import Outer, SqueezeSettings, asks_segment_test, squeeze_layer
 
 DEFAULT_SQUEEZE = SqueezeSettings()
+ASK_AHEAD = True
+"""Whether the squeeze and the repair ask closest points ahead, on a background thread (``ask_ahead``);
+off, every query is asked when it is needed: the same meshes, bit for bit (tested)."""
 
 
 @dataclass(frozen=True)
@@ -144,29 +148,58 @@ def _squeeze(models, layer_ids, beta, fitted, world, faces, body: ClosestPoint, 
     """World meshes with every garment pulled inside the outer ones that cover it
     (``service.pipeline.squeeze``), from the outermost inwards. Where an outer garment covers a vertex and how
     far it is comes from the outer garment's fields at the vertex's fitted canonical position, as in
-    ``_repair``, and from ``_deepen``'s ``pressed``; how far inside it goes, from its ``deep``."""
+    ``_repair``, and from ``_deepen``'s ``pressed``; how far inside it goes, from its ``deep``.
+
+    Garment i's mesh is final once its own squeeze is done (the outermost's from the start): the first
+    closest points of the garments two or more layers under it are asked ahead then (``ask_ahead``),
+    while the garments between are squeezed."""
     out = list(world)
     meshes: dict[int, ClosestPoint] = {}
-    for j in range(len(out) - 2, -1, -1):
-        outer = []
+    # (j, i): garment j's vertices near outer garment i and covered by it, where any are
+    masks = {}
+    for j in range(len(out) - 1):
         for i in range(j + 1, len(out)):
             f, h = _field_at(models, layer_ids, beta, fitted, i + 1, j)
             near, covered = np.abs(f) < REACH, h < 0
             if (j, i) in pressed:
                 near, covered = near | pressed[(j, i)], covered | pressed[(j, i)]
-            if not (near & covered).any():
+            if (near & covered).any():
+                masks[(j, i)] = (near, covered)
+    asked: dict[tuple[int, int], tuple[KeptQueries, Future]] = {}
+
+    def mesh(i: int) -> ClosestPoint:
+        if i not in meshes:
+            meshes[i] = ClosestPoint.build(out[i], faces[i])
+        return meshes[i]
+
+    def ahead(i: int) -> None:
+        """Garment i's mesh is final: ask it about the garments two or more under it, nearest first."""
+        for j in range(i - 2, -1, -1) if ASK_AHEAD else ():
+            if (j, i) in masks:
+                near, covered = masks[(j, i)]
+                kept = KeptQueries(mesh(i), len(out[j]))
+                asked[(j, i)] = (kept, ask_ahead(kept, out[j], np.flatnonzero(near & covered)))
+
+    ahead(len(out) - 1)
+    for j in range(len(out) - 2, -1, -1):
+        outer = []
+        for i in range(j + 1, len(out)):
+            if (j, i) not in masks:
                 continue
-            if i not in meshes:
-                meshes[i] = ClosestPoint.build(out[i], faces[i])
+            kept = None
+            if (j, i) in asked:
+                kept, future = asked.pop((j, i))
+                future.result()
             inner_g, outer_g = models.catalog[layer_ids[j + 1]], models.catalog[layer_ids[i + 1]]
             looser = asks_segment_test(inner_g, outer_g, models.layering_rule().holds_legs_apart)
-            outer.append(Outer(meshes[i], near, covered, looser_under=looser))
+            outer.append(Outer(mesh(i), *masks[(j, i)], looser_under=looser, kept=kept))
         if outer:
             floor = (j + 1) * DEFAULT_SQUEEZE.margin  # room for the garments under this one
             looser = any(o.looser_under for o in outer)  # else the segment test is never asked
             anchors = models.anchors(layer_ids[j + 1]).on(body.vertices, body.faces) if looser else None
             r = squeeze_layer(out[j], faces[j], outer, body, floor, squeeze, anchors, deep[j])
             out[j] = r.vertices if np.all(np.isfinite(r.vertices)) else out[j]
+        ahead(j)
     return out
 
 
@@ -197,16 +230,29 @@ def _repair(models, layer_ids, beta, body: ClosestPoint, explicit, fitted, fit_w
         f_body = _field_at(models, layer_ids, beta, fitted, 0, i)[0] - own[i]
         masks.append((f_body < REACH, f_body < settings.max_margin + BODY_QUERY_PAD))
     kept_body = _asked_together(body, world, [np.flatnonzero(near & query) for near, query in masks])
+    # (i, k): garment i's Inner for inner layer k (a garment), asked ahead (``ask_ahead``) once layer k
+    # was final, while the garments between were repaired, and the future its first answers come from.
+    asked: dict[tuple[int, int], tuple[Inner, Future]] = {}
+
+    def garment_inner(i: int, k: int) -> Inner:
+        """Layer k (a garment under garment i, final) as garment i's repair sees it."""
+        mesh, _, moved, turned = inner[k]
+        f_k, h_k = _field_at(models, layer_ids, beta, fitted, k, i)
+        near = np.abs(f_k) < REACH + moved + own[i]
+        return Inner(mesh, False, near, h_k < 0, reversed_faces=turned)
+
     for i, (x, f) in enumerate(zip(world, faces, strict=True)):
         layers = []
-        for k, (mesh, closed, moved, turned) in enumerate(inner):
+        for k, (mesh, closed, _, _) in enumerate(inner):
             if closed:
                 near, query = masks[i]
                 layers.append(Inner(mesh, True, near, np.ones(len(x), dtype=bool), query, kept_body[i]))
-                continue
-            f_k, h_k = _field_at(models, layer_ids, beta, fitted, k, i)
-            near = np.abs(f_k) < REACH + moved + own[i]
-            layers.append(Inner(mesh, closed, near, h_k < 0, reversed_faces=turned))
+            elif (i, k) in asked:
+                layer, future = asked.pop((i, k))
+                future.result()
+                layers.append(layer)
+            else:
+                layers.append(garment_inner(i, k))
         r = repair_layer(x, f, layers, settings)
         out.append(r.vertices if np.all(np.isfinite(r.vertices)) else x)
         results.append(r)
@@ -221,6 +267,13 @@ def _repair(models, layer_ids, beta, body: ClosestPoint, explicit, fitted, fit_w
         # Its faces turned against the body, the same for every layer over it.
         turned = models.anchors(layer_ids[i + 1]).reversed_faces(out[-1], f, body.vertices, body.faces)
         inner.append((ClosestPoint.build(out[-1], f), False, moved, turned))
+        # Its closest points for the garments two or more over it, nearest first, while the ones between
+        # are repaired: their first round asks every near vertex, where the squeeze left it.
+        k = len(inner) - 1
+        for later in range(i + 2, len(world)) if ASK_AHEAD else ():
+            layer = garment_inner(later, k)
+            layer.kept = KeptQueries(layer.mesh, len(world[later]), layer.reversed_faces)
+            asked[(later, k)] = (layer, ask_ahead(layer.kept, world[later], np.flatnonzero(layer.near)))
     return out, results
 
 

@@ -116,6 +116,25 @@ def test_blocked_threaded_query_is_the_single_block_query_bit_for_bit(monkeypatc
             np.testing.assert_array_equal(getattr(blocked, name), getattr(whole, name))
 
 
+def test_asked_ahead_answers_are_the_ones_asked_when_needed():
+    from service.geometry.closest import KeptQueries, ask_ahead
+
+    sphere = trimesh.creation.icosphere(subdivisions=3, radius=0.1)
+    x = np.random.default_rng(4).normal(scale=0.12, size=(3000, 3))
+    ask = np.flatnonzero(np.linalg.norm(x, axis=1) < 0.15)
+    turned = np.zeros(len(sphere.faces), dtype=bool)
+    turned[::7] = True  # the reversed faces' sign is kept the same way too
+    now = KeptQueries(ClosestPoint.build(sphere.vertices, sphere.faces), len(x), turned)
+    ahead = KeptQueries(ClosestPoint.build(sphere.vertices, sphere.faces), len(x), turned)
+    ask_ahead(ahead, x, ask).result()
+    assert not np.isnan(ahead.points[ask]).any() and np.isnan(np.delete(ahead.points, ask, axis=0)).all()
+    for got, ref in zip(ahead.at(x, ask), now.at(x, ask), strict=True):
+        np.testing.assert_array_equal(got, ref)
+    # nothing is asked again: the kept answers were the ones read
+    ahead.mesh = None
+    ahead.at(x, ask)
+
+
 FIELDS = ("face", "bary", "point", "distance", "signed", "normal")
 
 

@@ -147,6 +147,27 @@ def test_side_by_side_fits_equal_one_after_the_other(models, held_out_beta):
         assert np.array_equal(world, models.space.to_body(fitted, out.body_vertices)), gid
 
 
+@pytest.mark.parametrize("ids", [["tank_top", "tshirt", "long_sleeve", "jacket"],
+                                 ["jacket", "shorts", "long_sleeve"]])  # fmt: skip
+def test_asking_ahead_gives_the_meshes_of_asking_when_needed(models, held_out_beta, monkeypatch, ids):
+    # The squeeze and the repair ask some closest points ahead on a background thread: the answers
+    # are functions of the points alone, so the outfit must be the one of asking each when needed.
+    import service.pipeline.world_untangle as world_untangle
+
+    asked = []
+    ahead = world_untangle.ask_ahead
+    monkeypatch.setattr(world_untangle, "ask_ahead", lambda *a: asked.append(1) or ahead(*a))
+    with_ahead = make_outfit(models, ids, held_out_beta, measure=False)
+    assert asked  # two or more layers apart: some were asked ahead
+    monkeypatch.setattr(world_untangle, "ASK_AHEAD", False)
+    asked.clear()
+    when_needed = make_outfit(models, ids, held_out_beta, measure=False)
+    assert not asked
+    for (gid, v, _), (_, w, _) in zip(with_ahead.garments, when_needed.garments, strict=True):
+        assert np.array_equal(v, w), gid
+    assert with_ahead.report["repair"] == when_needed.report["repair"]
+
+
 def test_the_far_bounds_are_below_the_distances_on_every_body(models, held_out_beta):
     """``far_bounds`` skips a layer's field where its surface is provably far: each bound is at most the
     exact canonical distance from the vertex to the other garment's explicit mesh on held-out bodies

@@ -97,7 +97,7 @@ def test_kept_queries_answer_as_fresh_ones_after_some_vertices_move():
     moved[::5] += [0.0, 0.0, 0.003]
     asked = []
     query = layer.mesh.query
-    layer.mesh.query = lambda points: asked.append(len(points)) or query(points)
+    layer.mesh.query = lambda points, *split: asked.append(len(points)) or query(points, *split)
     signed, point, normal, _ = kept.at(moved, ask)
     assert asked == [len(np.intersect1d(ask, np.arange(0, n, 5)))]  # only the points that moved
     fresh = query(moved[near])
