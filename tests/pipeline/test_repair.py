@@ -189,6 +189,35 @@ def test_clear_of_is_the_reference_bit_for_bit():
     assert got.any() and not got.all()
 
 
+def test_no_triangle_proved_clear_touches_the_inner_layer():
+    # Loose triangles 0.5-3 cm across, from 1 cm inside a wavy sheet to 2 cm over it, some thin and
+    # obtuse: every one the proof calls clear is farther from the sheet than 0 at every sample point,
+    # and the three-ball rule proves some that one corner's ball does not.
+    from service.geometry.closest import closest_point_reference
+
+    inner_v, inner_f = _sheet(30, 0.4, lambda v: 0.01 * np.sin(25 * v[:, 0]))
+    rng = np.random.default_rng(11)
+    n = 3000
+    centre = np.column_stack([rng.uniform(-0.12, 0.12, (n, 2)), rng.uniform(-0.01, 0.02, n)])
+    size = rng.uniform(0.005, 0.03, n)[:, None, None]
+    corners = centre[:, None] + size * rng.normal(size=(n, 3, 3)) * [1, 1, 0.3]
+    x, faces = corners.reshape(-1, 3), np.arange(3 * n).reshape(n, 3)
+    kept = KeptQueries(ClosestPoint.build(inner_v, inner_f), len(x))
+    kept.at(x, np.arange(len(x)))
+    clear = _clear_of(x, faces, kept)
+    np.testing.assert_array_equal(clear, _clear_of_reference(x, faces, kept))
+    w = rng.dirichlet([1, 1, 1], 64)  # samples of each proved triangle, corners included
+    w = np.concatenate([np.eye(3), [[0.5, 0.5, 0], [0, 0.5, 0.5], [0.5, 0, 0.5]], w])
+    samples = np.einsum("sk,tkd->tsd", w, corners[clear]).reshape(-1, 3)
+    assert closest_point_reference(samples, inner_v, inner_f).distance.min() > 0
+    assert len(intersecting_pairs(x, faces[clear], inner_v, inner_f)) == 0
+    crossing = np.unique(intersecting_pairs(x, faces, inner_v, inner_f)[:, 0])
+    assert len(crossing) > 100 and not clear[crossing].any()
+    farthest = np.linalg.norm(corners[:, :, None] - corners[:, None], axis=3).max(axis=2)  # (n, 3)
+    one_corner = (np.abs(kept.signed[faces]) > farthest).any(axis=1)
+    assert (clear & ~one_corner).sum() > 100
+
+
 def test_faces_around_are_those_with_a_vertex_in_the_grown_box():
     inner_v, inner_f = _sheet(12, 0.4, lambda v: 0.0 * v[:, 0])
     mesh = ClosestPoint.build(inner_v, inner_f)
