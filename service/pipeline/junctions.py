@@ -59,15 +59,18 @@ def saddles(parts: frozenset[int], centres: np.ndarray, names: list[str]) -> lis
     return [0.5 * (centres[a] + centres[b]) for a, b in zip(idx, idx[1:], strict=False)]
 
 
-def lowering(inner: GarmentProfile, outer: GarmentProfile, body: BodySlices, outer_vertices: np.ndarray):
+def lowering(inner: GarmentProfile, outer: GarmentProfile, body: BodySlices, outer_vertices: np.ndarray,
+             between: int = 0):  # fmt: skip
     """``(V, 3)`` displacement of the outer garment's canonical ``outer_vertices (V, 3)`` (its drape on
     the mean body, of which ``outer`` is the profile) that brings its junctions ``EXTRA`` below the
-    inner garment's (``inner``'s profile), or None where the inner one's hangs no lower."""
+    inner garment's (``inner``'s profile), or None where the inner one's hangs no lower. ``between``:
+    garments between the two that were let down around the inner one too; each of their junctions
+    takes its own ``EXTRA`` below it, and this one comes down below all of them."""
     run = junction_run(inner, outer, body)
     if run is None:
         return None
     length, k, parts = run
-    drop = length * STEP + EXTRA
+    drop = length * STEP + EXTRA * (1 + between)
     z_saddle = body.levels[k] + STEP  # the first level where the outer garment joins the parts
     radius = max(RADIUS * drop, MIN_RADIUS)
     out = np.zeros_like(outer_vertices)

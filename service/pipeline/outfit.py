@@ -87,6 +87,19 @@ class OutfitModels:
         gets the same."""
         return self._junction(inner_id, outer_id)[1]
 
+    def lowering_below(self, inner_id: str, outer_id: str, between: int) -> np.ndarray | None:
+        """``lowering`` with ``between`` garments between the two let down around ``inner_id`` too
+        (``junctions.lowering``), made and kept per (pair, between)."""
+        if between == 0:
+            return self.lowering(inner_id, outer_id)
+        key = (inner_id, outer_id, between)
+        with self._lock:
+            if key not in self._junctions:
+                (_, inner), (drape, outer) = (self._drape_profile(g) for g in key[:2])
+                body = self.layering_rule().body
+                self._junctions[key] = (None, junctions.lowering(inner, outer, body, drape, between))
+            return self._junctions[key][1]
+
     def raising(self, inner_id: str, outer_id: str) -> junctions.Gathering | None:
         """How a top tucked into ``outer_id`` is gathered up above its crotch (``junctions.raising``), or
         None; made and kept as ``lowering``. A top in a bottom is raised, never the bottom let down."""
@@ -312,8 +325,18 @@ def make_outfit(
     # in canonical space, is the same for every body (service.pipeline.junctions).
     # A top tucked into a bottom whose crotch is higher than its hem is gathered up above it instead.
     lowered = [0.0] * len(garment_ids)
+    around: list[set[int]] = []  # per garment, the inner garments it was let down around
     for j, garment in enumerate(garment_ids):
-        drops = [models.lowering(inner, garment) for inner in garment_ids[:j]]
+        # Each garment let down around the same inner one takes its own room below it: the outer of
+        # two tops over a jacket comes down below the inner one's junction, not to it.
+        drops = []
+        for k, inner in enumerate(garment_ids[:j]):
+            d = models.lowering(inner, garment)
+            if d is not None:
+                between = sum(k in around[m] for m in range(k + 1, j))
+                d = models.lowering_below(inner, garment, between) if between else d
+            drops.append(d)
+        around.append({k for k, d in enumerate(drops) if d is not None})
         for k in range(j + 1, len(garment_ids)):  # read on this body: the bottom's crotch height
             gathering = models.raising(garment, garment_ids[k])
             drops.append(gathering and gathering.shift(explicit[j], explicit[k]))

@@ -43,6 +43,19 @@ def test_the_outer_crotch_comes_down_below_the_inner_one_and_nothing_else_moves(
     assert junctions.lowering(pants, pants, legs_body, pants_v) is None
 
 
+def test_each_garment_let_down_around_the_same_one_takes_its_own_room(legs_body):
+    # Two bottoms over a mini: the outer one's crotch comes down EXTRA below the inner one's, which
+    # itself comes down EXTRA below the mini's hem: one EXTRA more, over a bump that much wider.
+    parts = (tube(0.18, 0.8, 1.05), tube(0.08, 0.1, 0.8, -0.09), tube(0.08, 0.1, 0.8, 0.09))
+    pants_v, _ = closed(*parts)
+    pants = profile("pants", legs_body, *parts)
+    mini = profile("mini", legs_body, tube(0.22, 0.77, 1.05))
+    alone, below = (junctions.lowering(mini, pants, legs_body, pants_v, between) for between in (0, 1))
+    assert -below[:, 2].min() == pytest.approx(-alone[:, 2].min() + junctions.EXTRA)
+    assert np.all(below[:, 2] <= alone[:, 2])
+    assert (below[:, 2] < alone[:, 2]).sum() > (alone[:, 2] < 0).sum() // 2  # the bump grows with the drop
+
+
 def test_drops_for_several_inner_garments_take_the_deepest():
     a, b = np.zeros((3, 3)), np.zeros((3, 3))
     a[:, 2], b[:, 2] = [-0.1, 0.0, -0.02], [-0.05, -0.03, 0.0]

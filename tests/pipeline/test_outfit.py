@@ -12,6 +12,7 @@ import trimesh
 
 from benchmarks.orders import PENETRATION_LIMIT
 from service.cli import main
+from service.pipeline.junctions import EXTRA
 from service.pipeline.outfit import OutfitModels, make_outfit
 from training.drape.dataset import sample_betas
 
@@ -200,6 +201,22 @@ def test_an_outer_garment_comes_down_around_a_lower_junction(models, held_out_be
     assert r["collision_free"] and _tangle(r, "after") == (0, 0.0)
     monkeypatch.setattr(models, "lowering", lambda inner, outer: None)
     assert make_outfit(models, ids, held_out_beta, measure=False).report["crossing_pairs"] > 0
+
+
+def test_the_outer_of_two_tops_let_down_around_a_jacket_comes_down_below_the_inner_one(models, monkeypatch):
+    # The T-shirt and the tank top both come down around the jacket's low armhole; the tank top, over
+    # the T-shirt, takes its own room below the T-shirt's (one EXTRA more), not the same saddle.
+    asked = []
+    below = models.lowering_below
+    monkeypatch.setattr(models, "lowering_below", lambda *a: asked.append(a) or below(*a))
+    beta = sample_betas(2, 3)[1]
+    make_outfit(models, ["jacket", "tshirt", "tank_top"], beta, measure=False, untangle_layers=False)
+    assert asked == [("jacket", "tank_top", 1)]
+    alone, lower = models.lowering("jacket", "tank_top"), models.lowering_below("jacket", "tank_top", 1)
+    assert lower[:, 2].min() == pytest.approx(alone[:, 2].min() - EXTRA)
+    asked.clear()
+    make_outfit(models, ["jacket", "tshirt"], beta, measure=False, untangle_layers=False)
+    assert not asked  # a pair: nothing between
 
 
 def test_a_long_top_tucked_into_pants_is_gathered_above_their_crotch(models, held_out_beta, monkeypatch):
