@@ -6,6 +6,7 @@ Run (a minute or two each)::
     python -m benchmarks.orders --pairs [--bodies 1]           # every ordered pair, held-out + corners
     python -m benchmarks.orders --stacks 100 [--seed 7]        # random stacks of 3-4, held-out + corners
     python -m benchmarks.orders --junctions                    # armholes and crotches, template vs drape
+    python -m benchmarks.orders --let-down [--bodies 1]        # pairs let down at a junction, 4 corners
 
 The default: ``--outfits`` outfits of 1-4 catalog garments in random order (many of them orders cloth
 cannot take: shorts over a skirt, a T-shirt over a jacket) on held-out body shapes (a Sobol seed no
@@ -140,6 +141,20 @@ def pairs(models: OutfitModels, args) -> None:
     _table(f"Every ordered pair of catalog garments on {args.bodies} held-out bodies + 2 corners", runs)
 
 
+def let_down(models: OutfitModels, args) -> None:
+    """The ordered pairs whose outer garment is let down around the inner one's junction
+    (``OutfitModels.lowering``), on ``--bodies`` held-out bodies and all four corners: the pairs whose
+    outcome depends most on the body."""
+    betas = np.concatenate([sample_betas(args.bodies, BODY_SEED), corners()])
+    chosen = [
+        list(ids)
+        for ids in itertools.permutations(sorted(models.catalog), 2)
+        if not models.refusals(list(ids)) and models.lowering(*ids) is not None
+    ]
+    runs = [(ids, beta, measured(models, ids, beta)) for ids in chosen for beta in betas]
+    _table(f"Pairs let down at a junction on {args.bodies} held-out bodies + 4 corners", runs)
+
+
 def stacks(models: OutfitModels, args) -> None:
     rng = np.random.default_rng(args.seed)
     catalog = sorted(models.catalog)
@@ -188,15 +203,18 @@ def main(argv=None) -> None:
     parser.add_argument("--bodies", type=int, default=1, help="held-out bodies for --pairs (plus 2 corners)")
     parser.add_argument("--stacks", type=int, default=0, help="random stacks of 3-4 garments (issue 21)")
     parser.add_argument("--junctions", action="store_true", help="armhole and crotch depths, no outfits")
+    parser.add_argument("--let-down", action="store_true", help="pairs let down at a junction, 4 corners")
     args = parser.parse_args(argv)
     models = OutfitModels.load()
     if args.junctions:
         junctions(models)
     if args.pairs:
         pairs(models, args)
+    if args.let_down:
+        let_down(models, args)
     if args.stacks:
         stacks(models, args)
-    if not (args.pairs or args.stacks or args.junctions):
+    if not (args.pairs or args.stacks or args.junctions or args.let_down):
         random_orders(models, args)
 
 

@@ -86,11 +86,20 @@ class GarmentProfile:
     loops: list[list[Loop]]
 
     @classmethod
-    def build(cls, garment_id: str, vertices: np.ndarray, faces: np.ndarray, body: BodySlices):
+    def build(cls, garment_id: str, vertices: np.ndarray, faces: np.ndarray, body: BodySlices,
+              levels: range | None = None):  # fmt: skip
+        """The profile of ``vertices (V, 3)``, ``faces (F, 3)``; with ``levels`` (indices into
+        ``body.levels``) sliced at those levels only, the others left without loops."""
         out = []
+        if levels is not None and len(levels):
+            # Only the triangles that reach into the levels' span: the same slices, less to cut.
+            z = vertices[faces, 2]
+            lo, hi = body.levels[levels[0]], body.levels[levels[-1]]
+            faces = faces[(z.max(axis=1) >= lo) & (z.min(axis=1) <= hi)]
+        bottom, top = vertices[:, 2].min(), vertices[:, 2].max()
         for k, z in enumerate(body.levels):
             loops = []
-            if vertices[:, 2].min() < z < vertices[:, 2].max():
+            if (levels is None or k in levels) and bottom < z < top:
                 for lp in slice_loops(vertices, faces, z):
                     if lp.closed and len(body.centres[k]):
                         inside = np.flatnonzero(lp.contains(body.centres[k]))

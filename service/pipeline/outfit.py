@@ -80,23 +80,28 @@ class OutfitModels:
             self._anchors[layer_id] = BodyAnchors.build(self.catalog[layer_id].vertices, self.space.closest)
         return self._anchors[layer_id]
 
-    def lowering(self, inner_id: str, outer_id: str) -> np.ndarray | None:
+    def lowering(self, inner_id: str, outer_id: str, between: int = 0,
+                 on: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray | None:  # fmt: skip
         """The canonical displacement (V, 3) that lets ``outer_id``'s junctions down below
-        ``inner_id``'s (``service.pipeline.junctions``), or None; made from the two drapes on the mean
-        body (``warm`` makes their profiles at start) on first use, ~1 ms, and kept: every body shape
-        gets the same."""
-        return self._junction(inner_id, outer_id)[1]
-
-    def lowering_below(self, inner_id: str, outer_id: str, between: int) -> np.ndarray | None:
-        """``lowering`` with ``between`` garments between the two let down around ``inner_id`` too
-        (``junctions.lowering``), made and kept per (pair, between)."""
+        ``inner_id``'s (``service.pipeline.junctions``), or None where their drapes on the mean body
+        have no junction run. ``between``: garments between the two let down around ``inner_id`` too.
+        ``on``: the two garments' explicit meshes on the body they are worn on (canonical, before any
+        junction moved them): the drop is then that body's (``junctions.body_run``, ~20 ms), else the
+        mean body's, made on first use (~1 ms) and kept."""
+        if self._junction(inner_id, outer_id)[1] is None:
+            return None
+        with self._lock:  # made by _junction
+            (_, inner), (drape, outer) = (self._drape_profile(g) for g in (inner_id, outer_id))
+        body = self.layering_rule().body
+        if on is not None:
+            faces = (self.catalog[inner_id].faces, self.catalog[outer_id].faces)
+            length = junctions.body_run(inner, outer, body, on[0], faces[0], on[1], faces[1])
+            return junctions.lowering(inner, outer, body, drape, between, length)
         if between == 0:
-            return self.lowering(inner_id, outer_id)
+            return self._junction(inner_id, outer_id)[1]
         key = (inner_id, outer_id, between)
         with self._lock:
             if key not in self._junctions:
-                (_, inner), (drape, outer) = (self._drape_profile(g) for g in key[:2])
-                body = self.layering_rule().body
                 self._junctions[key] = (None, junctions.lowering(inner, outer, body, drape, between))
             return self._junctions[key][1]
 
@@ -331,11 +336,8 @@ def make_outfit(
         # two tops over a jacket comes down below the inner one's junction, not to it.
         drops = []
         for k, inner in enumerate(garment_ids[:j]):
-            d = models.lowering(inner, garment)
-            if d is not None:
-                between = sum(k in around[m] for m in range(k + 1, j))
-                d = models.lowering_below(inner, garment, between) if between else d
-            drops.append(d)
+            between = sum(k in around[m] for m in range(k + 1, j))
+            drops.append(models.lowering(inner, garment, between, (unshifted[k], unshifted[j])))
         around.append({k for k, d in enumerate(drops) if d is not None})
         for k in range(j + 1, len(garment_ids)):  # read on this body: the bottom's crotch height
             gathering = models.raising(garment, garment_ids[k])

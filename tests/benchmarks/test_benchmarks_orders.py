@@ -52,3 +52,25 @@ def test_the_junction_table_lists_the_catalog_pairs_with_a_run(models, capsys):
     # the drape's armhole hangs lower than the template's
     assert int(cells["jacket < tshirt"][3]) > int(cells["jacket < tshirt"][2]) > 0
     assert "tshirt < jacket" not in cells  # the usual order holds nothing apart
+
+
+def test_the_let_down_table_takes_the_pairs_with_a_lowering_on_every_corner(models, monkeypatch, capsys):
+    import argparse
+
+    import benchmarks.orders as orders
+    from benchmarks.imported import corners
+
+    asked = []
+    monkeypatch.setattr(orders, "measured", lambda m, ids, beta: asked.append((tuple(ids), tuple(beta))) or {
+        "refused": "probe"})  # fmt: skip
+    orders.let_down(models, argparse.Namespace(bodies=1))
+    pairs = sorted({ids for ids, _ in asked})
+    # orders against the grain whose inner junction hangs lower: the long sleeve and the jacket under
+    # tighter tops, shorts under pants; never the usual way (a T-shirt under a jacket)
+    assert ("jacket", "tank_top") in pairs and ("shorts", "pants") in pairs
+    assert ("tshirt", "jacket") not in pairs and ("pants", "shorts") not in pairs
+    assert all(models.lowering(*ids) is not None and not models.refusals(list(ids)) for ids in pairs)
+    bodies = {beta for _, beta in asked}
+    assert len(bodies) == 5 and {tuple(c) for c in corners()} <= bodies
+    assert len(asked) == 5 * len(pairs)
+    assert "Pairs let down at a junction" in capsys.readouterr().out

@@ -56,6 +56,28 @@ def test_each_garment_let_down_around_the_same_one_takes_its_own_room(legs_body)
     assert (below[:, 2] < alone[:, 2]).sum() > (alone[:, 2] < 0).sum() // 2  # the bump grows with the drop
 
 
+def test_the_drop_is_read_on_the_body_the_garments_are_worn_on(legs_body):
+    # The drapes on the mean body put the mini's hem 3 cm below the pants' crotch; on another body its
+    # explicit mesh hangs 8 cm below (and the pants are unchanged): the run on that body is 8 levels,
+    # the drop 8 cm + EXTRA, the bump where the drapes put it. A hem above the crotch there: no run, a
+    # drop of EXTRA alone.
+    parts = (tube(0.18, 0.8, 1.05), tube(0.08, 0.1, 0.8, -0.09), tube(0.08, 0.1, 0.8, 0.09))
+    pants_v, pants_f = closed(*parts)
+    pants = profile("pants", legs_body, *parts)
+    mini = profile("mini", legs_body, tube(0.22, 0.77, 1.05))
+    assert junction_run(mini, pants, legs_body)[0] == 3
+    for hem, length in ((0.72, 8), (0.83, 0)):
+        here_v, here_f = closed(tube(0.22, hem, 1.05))
+        assert junctions.body_run(mini, pants, legs_body, here_v, here_f, pants_v, pants_f) == length
+        if length:  # the whole-profile run agrees with the one sliced near the drapes' run
+            whole = profile("mini", legs_body, tube(0.22, hem, 1.05))
+            assert junction_run(whole, pants, legs_body)[0] == length
+        drop = junctions.lowering(mini, pants, legs_body, pants_v, length=length)
+        assert -drop[:, 2].min() == pytest.approx(length * STEP + junctions.EXTRA)
+        drapes = junctions.lowering(mini, pants, legs_body, pants_v)
+        assert np.argmin(drop[:, 2]) == np.argmin(drapes[:, 2])  # the same saddle
+
+
 def test_drops_for_several_inner_garments_take_the_deepest():
     a, b = np.zeros((3, 3)), np.zeros((3, 3))
     a[:, 2], b[:, 2] = [-0.1, 0.0, -0.02], [-0.05, -0.03, 0.0]

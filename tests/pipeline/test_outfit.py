@@ -199,24 +199,27 @@ def test_an_outer_garment_comes_down_around_a_lower_junction(models, held_out_be
     assert models.lowering(*ids) is not None
     r = make_outfit(models, ids, held_out_beta, measure=True).report
     assert r["collision_free"] and _tangle(r, "after") == (0, 0.0)
-    monkeypatch.setattr(models, "lowering", lambda inner, outer: None)
+    monkeypatch.setattr(models, "lowering", lambda *asked: None)
     assert make_outfit(models, ids, held_out_beta, measure=False).report["crossing_pairs"] > 0
 
 
 def test_the_outer_of_two_tops_let_down_around_a_jacket_comes_down_below_the_inner_one(models, monkeypatch):
     # The T-shirt and the tank top both come down around the jacket's low armhole; the tank top, over
-    # the T-shirt, takes its own room below the T-shirt's (one EXTRA more), not the same saddle.
+    # the T-shirt, takes its own room below the T-shirt's (one EXTRA more), not the same saddle. Each
+    # drop is read on the body (the garments' explicit meshes there, junctions.body_run).
     asked = []
-    below = models.lowering_below
-    monkeypatch.setattr(models, "lowering_below", lambda *a: asked.append(a) or below(*a))
+    lowering = models.lowering
+    monkeypatch.setattr(models, "lowering", lambda *a: asked.append(a) or lowering(*a))
     beta = sample_betas(2, 3)[1]
     make_outfit(models, ["jacket", "tshirt", "tank_top"], beta, measure=False, untangle_layers=False)
-    assert asked == [("jacket", "tank_top", 1)]
-    alone, lower = models.lowering("jacket", "tank_top"), models.lowering_below("jacket", "tank_top", 1)
+    down = [(a[:3], lowering(*a)) for a in asked]
+    assert [key for key, d in down if d is not None] == [("jacket", "tshirt", 0), ("jacket", "tank_top", 1)]
+    (on,) = [a[3] for a in asked if a[:2] == ("jacket", "tank_top")]
+    alone, lower = lowering("jacket", "tank_top", 0, on), lowering("jacket", "tank_top", 1, on)
     assert lower[:, 2].min() == pytest.approx(alone[:, 2].min() - EXTRA)
     asked.clear()
     make_outfit(models, ["jacket", "tshirt"], beta, measure=False, untangle_layers=False)
-    assert not asked  # a pair: nothing between
+    assert [a[:3] for a in asked] == [("jacket", "tshirt", 0)]  # a pair: nothing between
 
 
 def test_a_long_top_tucked_into_pants_is_gathered_above_their_crotch(models, held_out_beta, monkeypatch):
