@@ -86,24 +86,19 @@ class OutfitModels:
         ``inner_id``'s (``service.pipeline.junctions``), or None where their drapes on the mean body
         have no junction run. ``between``: garments between the two let down around ``inner_id`` too.
         ``on``: the two garments' explicit meshes on the body they are worn on (canonical, before any
-        junction moved them): the drop is then that body's (``junctions.body_run``, ~20 ms), else the
-        mean body's, made on first use (~1 ms) and kept."""
+        junction moved them): the drop is then that body's (``junctions.body_run``, 25-45 ms a pair in
+        a one-off timing), as every request asks; else the mean body's, made on first use (~1 ms)."""
         if self._junction(inner_id, outer_id)[1] is None:
             return None
+        if on is None and between == 0:
+            return self._junction(inner_id, outer_id)[1]
         with self._lock:  # made by _junction
             (_, inner), (drape, outer) = (self._drape_profile(g) for g in (inner_id, outer_id))
-        body = self.layering_rule().body
+        body, length = self.layering_rule().body, None
         if on is not None:
             faces = (self.catalog[inner_id].faces, self.catalog[outer_id].faces)
             length = junctions.body_run(inner, outer, body, on[0], faces[0], on[1], faces[1])
-            return junctions.lowering(inner, outer, body, drape, between, length)
-        if between == 0:
-            return self._junction(inner_id, outer_id)[1]
-        key = (inner_id, outer_id, between)
-        with self._lock:
-            if key not in self._junctions:
-                self._junctions[key] = (None, junctions.lowering(inner, outer, body, drape, between))
-            return self._junctions[key][1]
+        return junctions.lowering(inner, outer, body, drape, between, length)
 
     def raising(self, inner_id: str, outer_id: str) -> junctions.Gathering | None:
         """How a top tucked into ``outer_id`` is gathered up above its crotch (``junctions.raising``), or
