@@ -41,6 +41,7 @@ from service.geometry.mesh import vertex_normals
 from service.geometry.mesh_topology import faces_key
 from service.pipeline.fields import FieldValues
 from service.pipeline.lbfgs import minimize_lbfgs
+from service.pipeline.lbfgs_kernel import minimize_fit
 from service.pipeline.strain import RestShape, strain_energy
 
 # fields(layer, x (P, 3), gradient) -> FieldValues
@@ -111,6 +112,9 @@ class FitSettings:
     the others (``_moved_values``; the residual the L-BFGS reached), or the networks for every layer (the
     reference; with ``outer`` > 1 the next linearisations start from them). The networks asked again
     took ~12 % of the fit's time for body + 4 garments."""
+    optimiser: Literal["compiled", "numpy"] = "compiled"
+    """The L-BFGS run: one compiled loop that releases the GIL (``lbfgs_kernel.minimize_fit``) or the
+    numpy one (``lbfgs.minimize_lbfgs``, the reference), the same iterates to rounding."""
 
 
 @dataclass(frozen=True)
@@ -396,6 +400,11 @@ def far_layers(f_star: np.ndarray, layer: int, reach: float) -> np.ndarray:
     return far
 
 
+LBFGS_MEMORY = 8
+LBFGS_GTOL = 1e-9
+LBFGS_FIRST_STEP = 1e-4
+
+
 def _minimise(x, idx, r0, g, rest, settings: FitSettings):
     """L-BFGS on the linearised misfit sum (r0 + g . d)^2 plus the exact strain term, over the
     vertices ``idx``; returns (their new positions (n, 3), iterations, finite).
@@ -421,7 +430,14 @@ def _minimise(x, idx, r0, g, rest, settings: FitSettings):
         e = float(r @ r) + settings.omega * es
         return e, (2 * r[:, None] * g + settings.omega * gs[slot]).reshape(-1)
 
-    res = minimize_lbfgs(objective, (y0 + step).reshape(-1), settings.inner, gtol=1e-9, first_step=1e-4)
+    start = (y0 + step).reshape(-1)
+    if settings.optimiser == "compiled":
+        flat, nit, _ = minimize_fit(start, y0, r0, g, xl, slot, local.faces, local.dm_inv, settings.omega,
+                                    settings.inner, LBFGS_MEMORY, LBFGS_GTOL, LBFGS_FIRST_STEP)  # fmt: skip
+        y = flat.reshape(-1, 3)
+        ok = bool(np.all(np.isfinite(y)))
+        return (y if ok else y0), nit, ok
+    res = minimize_lbfgs(objective, start, settings.inner, LBFGS_MEMORY, LBFGS_GTOL, LBFGS_FIRST_STEP)
     y = res.x.reshape(-1, 3)
     ok = bool(np.all(np.isfinite(y)))
     return (y if ok else y0), res.nit, ok

@@ -54,6 +54,18 @@ class RestShape:
         The fit's strain term touches a few thousand of a garment's vertices: on the compact numbering
         every gradient is ``(n, 3)`` instead of ``(V, 3)`` (the same numbers, a third of the time).
         """
+        keep = np.asarray(keep, dtype=np.int64)
+        top = max(int(self.faces.max(initial=-1)), int(keep.max(initial=-1))) + 1
+        mark = np.zeros(top, dtype=bool)
+        mark[self.faces.ravel()] = True
+        mark[keep] = True
+        used = np.flatnonzero(mark)  # np.union1d's sorted ids, without its sort
+        number = np.empty(top, dtype=np.int64)
+        number[used] = np.arange(len(used))
+        return used, RestShape(number[self.faces], self.dm_inv)
+
+    def compact_reference(self, keep: np.ndarray) -> tuple[np.ndarray, RestShape]:
+        """``compact`` by sorting (``np.union1d``, ``np.searchsorted``)."""
         used = np.union1d(self.faces.ravel(), keep)
         return used, RestShape(np.searchsorted(used, self.faces), self.dm_inv)
 

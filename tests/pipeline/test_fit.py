@@ -182,6 +182,9 @@ def test_compact_strain_equals_the_full_mesh_strain_on_its_vertices():
     assert e_local == pytest.approx(e_full, rel=1e-12)
     np.testing.assert_allclose(g_local, g_full[used], rtol=1e-12, atol=1e-15)
     assert np.all(np.delete(g_full, used, axis=0) == 0)
+    used_ref, local_ref = part.compact_reference(keep)
+    np.testing.assert_array_equal(used, used_ref)
+    np.testing.assert_array_equal(local.faces, local_ref.faces)
 
 
 def test_far_layers_are_never_asked_for_gradients_and_do_not_change_the_fit():
