@@ -22,7 +22,7 @@ from service.pipeline.strain import _strain_kernel
 
 @njit(cache=True, nogil=True)
 def _objective(flat, y0, r0, g, xl, slot, faces, dm_inv, omega, grad):
-    """E at ``flat (3 n,)`` (the fitted vertices' positions, flattened) and its gradient into ``grad (3 n,)``."""
+    """E at ``flat (3 n,)`` (the fitted vertices' positions, flattened); its gradient into ``grad (3 n,)``."""
     n = len(r0)
     misfit = 0.0
     for v in range(n):

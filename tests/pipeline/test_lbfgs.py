@@ -1,5 +1,5 @@
-"""service.pipeline.lbfgs against scipy's L-BFGS-B (the reference) on problems with known minima, and the fit's
-compiled L-BFGS (service.pipeline.lbfgs_kernel) against it."""
+"""service.pipeline.lbfgs against scipy's L-BFGS-B (the reference) on problems with known minima, and
+the fit's compiled L-BFGS (service.pipeline.lbfgs_kernel) against it."""
 
 from __future__ import annotations
 
