@@ -68,9 +68,34 @@ def face_normals_reference(vertices: np.ndarray, faces: np.ndarray, normalize: b
 
 
 def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """Area-weighted unit vertex normals ``(V, 3)``."""
+    """Area-weighted unit vertex normals ``(V, 3)``: ``vertex_normals_reference`` bit for bit, in one
+    compiled pass (``_vertex_normals``; every fit takes its garment's)."""
+    vertices = np.ascontiguousarray(vertices, dtype=np.float64)
+    faces = np.ascontiguousarray(faces, dtype=np.int64)
     fn = face_normals(vertices, faces, normalize=False)
-    # np.add.at over the three corners in turn, as one bincount per axis (same order, same sums).
+    vn = np.zeros((len(vertices), 3))
+    _vertex_normals(faces, fn, vn)
+    return vn
+
+
+@njit(cache=True, nogil=True)
+def _vertex_normals(faces, fn, vn):
+    """The face normals summed into their corners, corner 0 of every face first, then 1, then 2 (the
+    reference's bincount order), each sum then divided by its length (np.linalg.norm's x, y, z)."""
+    for k in range(3):
+        for t in range(len(faces)):
+            v = faces[t, k]
+            vn[v, 0] += fn[t, 0]
+            vn[v, 1] += fn[t, 1]
+            vn[v, 2] += fn[t, 2]
+    for v in range(len(vn)):
+        length = max(np.sqrt(vn[v, 0] * vn[v, 0] + vn[v, 1] * vn[v, 1] + vn[v, 2] * vn[v, 2]), 1e-30)
+        vn[v, 0], vn[v, 1], vn[v, 2] = vn[v, 0] / length, vn[v, 1] / length, vn[v, 2] / length
+
+
+def vertex_normals_reference(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """``vertex_normals`` with numpy: np.add.at over the three corners in turn, as one bincount per axis."""
+    fn = face_normals(vertices, faces, normalize=False)
     index, values = np.asarray(faces).T.reshape(-1), np.tile(fn, (3, 1))
     vn = np.stack(
         [np.bincount(index, weights=values[:, d], minlength=len(vertices)) for d in range(3)], axis=1

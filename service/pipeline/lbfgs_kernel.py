@@ -61,23 +61,29 @@ def _max_abs(a):
 @njit(cache=True, nogil=True)
 def _two_loop(grad, S, Y, rho, order, count, first_step, out):
     """``lbfgs._two_loop``: H grad into ``out``, the pairs ``S, Y, rho`` in rows ``order[:count]``
-    (oldest first)."""
-    out[:] = grad
+    (oldest first). Loops, not array expressions: the same arithmetic, compiled in a fraction of the time."""
+    size = len(grad)
+    for i in range(size):
+        out[i] = grad[i]
     alphas = np.empty(max(count, 1))
     for c in range(count - 1, -1, -1):
         k = order[c]
         a = rho[k] * _dot(S[k], out)
-        out -= a * Y[k]
+        for i in range(size):
+            out[i] -= a * Y[k, i]
         alphas[c] = a
     if count:
         k = order[count - 1]
-        out *= 1.0 / (rho[k] * _dot(Y[k], Y[k]))
+        scale = 1.0 / (rho[k] * _dot(Y[k], Y[k]))
     else:
-        out *= first_step / max(_max_abs(grad), 1e-300)
+        scale = first_step / max(_max_abs(grad), 1e-300)
+    for i in range(size):
+        out[i] *= scale
     for c in range(count):
         k = order[c]
         b = rho[k] * _dot(Y[k], out)
-        out += (alphas[c] - b) * S[k]
+        for i in range(size):
+            out[i] += (alphas[c] - b) * S[k, i]
 
 
 @njit(cache=True, nogil=True)
@@ -101,12 +107,14 @@ def minimize_fit(x0, y0, r0, g, xl, slot, faces, dm_inv, omega, max_iterations, 
         if _max_abs(grad) <= gtol:
             return x, it, True
         _two_loop(grad, S, Y, rho, order, count, first_step, p)
-        p *= -1.0
+        for i in range(size):
+            p[i] = -p[i]
         slope = _dot(grad, p)
         if slope >= 0:  # not a descent direction (round-off): restart from steepest descent
             count = 0
             _two_loop(grad, S, Y, rho, order, count, first_step, p)
-            p *= -1.0
+            for i in range(size):
+                p[i] = -p[i]
             slope = _dot(grad, p)
         t = 1.0
         while True:
@@ -124,7 +132,9 @@ def minimize_fit(x0, y0, r0, g, xl, slot, faces, dm_inv, omega, max_iterations, 
         sy = _dot(s, y)
         if sy > 1e-16 * _dot(y, y):  # keep only pairs of positive curvature, in the oldest one's row
             row = count if count < memory else order[0]
-            S[row], Y[row], rho[row] = s, y, 1.0 / sy
+            for i in range(size):
+                S[row, i], Y[row, i] = s[i], y[i]
+            rho[row] = 1.0 / sy
             if count < memory:
                 order[count] = row
                 count += 1
@@ -135,5 +145,6 @@ def minimize_fit(x0, y0, r0, g, xl, slot, faces, dm_inv, omega, max_iterations, 
         for i in range(size):
             x[i] += s[i]
         f = f_new
-        grad[:] = grad_new
+        for i in range(size):
+            grad[i] = grad_new[i]
     return x, max_iterations, _max_abs(grad) <= gtol

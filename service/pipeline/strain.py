@@ -23,6 +23,18 @@ class RestShape:
 
     @classmethod
     def build(cls, vertices: np.ndarray, faces: np.ndarray) -> RestShape:
+        """From the rest mesh ``vertices (V, 3)``, ``faces (F, 3)``: ``build_reference`` bit for bit, in
+        one compiled pass (``_rest_kernel``; every fit builds it for its garment's explicit mesh)."""
+        v = np.ascontiguousarray(vertices, dtype=np.float64)
+        faces = np.ascontiguousarray(faces, dtype=np.int64)
+        dm_inv = np.zeros((len(faces), 2, 2))
+        _rest_kernel(v, faces, dm_inv)
+        return cls(faces, dm_inv)
+
+    @classmethod
+    def build_reference(cls, vertices: np.ndarray, faces: np.ndarray) -> RestShape:
+        """``build`` with numpy arrays: the rest triangle in an orthonormal frame of its plane (e1 along its
+        first edge), Dm = [[|e1|, e2 . u], [0, |w|]] with w the part of e2 across u, inverted."""
         v = np.asarray(vertices, dtype=np.float64)
         faces = np.asarray(faces, dtype=np.int64)
         e1 = v[faces[:, 1]] - v[faces[:, 0]]
@@ -80,6 +92,27 @@ def strain_energy(x: np.ndarray, rest: RestShape) -> tuple[float, np.ndarray]:
     grad = np.zeros_like(x)
     energy = _strain_kernel(x, rest.faces, rest.dm_inv, grad)
     return float(energy), grad
+
+
+@njit(cache=True, nogil=True)
+def _rest_kernel(v, faces, dm_inv):
+    """``RestShape.build_reference``'s operations per triangle, in its order: np.linalg.norm sums the
+    squares x, y, z; einsum's three-term dot product adds x and z first, then y."""
+    for t in range(len(faces)):
+        i, j, k = faces[t, 0], faces[t, 1], faces[t, 2]
+        e1x, e1y, e1z = v[j, 0] - v[i, 0], v[j, 1] - v[i, 1], v[j, 2] - v[i, 2]
+        e2x, e2y, e2z = v[k, 0] - v[i, 0], v[k, 1] - v[i, 1], v[k, 2] - v[i, 2]
+        n1 = np.sqrt(e1x * e1x + e1y * e1y + e1z * e1z)
+        scale = max(n1, 1e-300)
+        ux, uy, uz = e1x / scale, e1y / scale, e1z / scale
+        p = (e2x * ux + e2z * uz) + e2y * uy
+        wx, wy, wz = e2x - p * ux, e2y - p * uy, e2z - p * uz
+        nw = np.sqrt(wx * wx + wy * wy + wz * wz)
+        if n1 > 1e-12 and nw > 1e-12:  # a degenerate rest triangle gets no strain term
+            a, d = 1.0 / n1, 1.0 / nw
+            dm_inv[t, 0, 0] = a
+            dm_inv[t, 0, 1] = -p * a * d
+            dm_inv[t, 1, 1] = d
 
 
 @njit(cache=True, nogil=True, inline="always")

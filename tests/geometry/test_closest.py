@@ -10,7 +10,12 @@ import pytest
 import trimesh
 
 from service.geometry.closest import ClosestPoint, closest_on_triangles, closest_point_reference
-from service.geometry.mesh import face_normals, face_normals_reference
+from service.geometry.mesh import (
+    face_normals,
+    face_normals_reference,
+    vertex_normals,
+    vertex_normals_reference,
+)
 from service.geometry.mesh_topology import (
     LazyPseudoNormals,
     MeshTopology,
@@ -306,3 +311,15 @@ def test_face_normals_are_the_reference_bit_for_bit():
     f[:5, 1] = f[:5, 0]  # degenerate: zero normals
     for normalize in (True, False):
         np.testing.assert_array_equal(face_normals(v, f, normalize), face_normals_reference(v, f, normalize))
+
+
+def test_vertex_normals_are_the_reference_bit_for_bit():
+    rng = np.random.default_rng(6)
+    v = rng.normal(size=(500, 3)) * 10.0 ** rng.integers(-4, 3, size=(500, 1))
+    f = rng.integers(0, 480, size=(1000, 3))  # vertices 480.. in no face: zero normals
+    f[:5, 1] = f[:5, 0]
+    normals = vertex_normals(v, f)
+    np.testing.assert_array_equal(normals, vertex_normals_reference(v, f))
+    length = np.linalg.norm(normals, axis=1)
+    assert np.all(normals[480:] == 0) and (length[:480] > 0).sum() > 400
+    np.testing.assert_allclose(length[length > 0], 1)
