@@ -20,7 +20,7 @@ import numpy as np
 from numba import njit
 from scipy.spatial import cKDTree
 
-from service.geometry import bvh_kernel
+from service.geometry import bvh_kernel, finish_kernel
 from service.geometry.mesh import check_mesh, face_normals
 from service.geometry.mesh_topology import LazyPseudoNormals, MeshTopology, PseudoNormals, mesh_topology
 from service.process.threads import pool
@@ -192,7 +192,15 @@ class ClosestPoint:
         """``(N,) bool``: closest points ``c`` lying on the mesh's boundary (a rim edge or its ends).
 
         There the point is past the mesh's edge rather than on one of its sides: the pseudo-normal's
-        sign says little (a point below a T-shirt's hem reads as inside it)."""
+        sign says little (a point below a T-shirt's hem reads as inside it). ``on_boundary_reference``
+        bit for bit, compiled (``finish_kernel.on_boundary``)."""
+        out = np.empty(len(c.face), dtype=np.bool_)
+        finish_kernel.on_boundary(self.faces, c.face, np.ascontiguousarray(c.bary), self.boundary_vertices,
+                                  self.boundary_edges, len(self.vertices), out)  # fmt: skip
+        return out
+
+    def on_boundary_reference(self, c: Closest) -> np.ndarray:
+        """``on_boundary`` in numpy."""
         zero = c.bary <= 1e-12
         tri = self.faces[c.face]
         n_v = len(self.vertices)
@@ -271,7 +279,21 @@ class ClosestPoint:
         if len(missing):  # a NaN point, which no box holds: as the reference has it
             ref = closest_point_reference(points[missing], self.vertices, self.faces)
             face[missing], bary[missing], point[missing] = ref.face, ref.bary, ref.point
-        return _finish(points, self.vertices, self.faces, self.fn, face, bary, self.pseudo, point)
+        return self._finish(points, face, bary, point)
+
+    def _finish(self, points, face, bary, point) -> Closest:
+        """The ``Closest`` of ``points (N, 3)`` from their closest faces, barycentric coordinates and points:
+        ``_finish``'s (the reference's) bits, compiled (``finish_kernel``), but for the lazy pseudo-normals
+        the points reach for the first time, which numpy computes (``LazyPseudoNormals.ready``)."""
+        n = len(points)
+        kind, index = np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64)
+        pseudo = self.pseudo
+        finish_kernel.features(self.faces, face, bary, pseudo.edge_keys, len(self.vertices), kind, index)
+        pseudo.ready(index[kind == finish_kernel.VERTEX], index[kind == finish_kernel.EDGE])
+        dist, signed, normal = np.empty(n), np.empty(n), np.empty((n, 3))
+        finish_kernel.finish(points, point, face, kind, index, self.fn, pseudo.vertex, pseudo.edge, dist, signed,
+                             normal)  # fmt: skip
+        return Closest(face, bary, point, dist, signed, normal)
 
 
 QUERY_BLOCK = 4096

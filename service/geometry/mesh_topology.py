@@ -91,6 +91,10 @@ class PseudoNormals:
         """Pseudo-normals ``(N, 3)`` of vertices ``index (N,)``."""
         return self.vertex[index]
 
+    def ready(self, vertices: np.ndarray, edges: np.ndarray) -> None:
+        """Make sure ``vertex`` holds the rows ``vertices (N,)`` and ``edge`` the rows ``edges (M,)``
+        (all of them are, here)."""
+
     def edge_at(self, index: np.ndarray) -> np.ndarray:
         """Pseudo-normals ``(N, 3)`` of edges ``index (N,)`` (rows of ``edge_keys``)."""
         return self.edge[index]
@@ -238,6 +242,12 @@ class LazyPseudoNormals(PseudoNormals):
         out._edge_done = np.zeros(len(topology.edge_keys), dtype=bool)
         out._lock = threading.Lock()  # the query's threads may ask for the same normals
         return out
+
+    def ready(self, vertices: np.ndarray, edges: np.ndarray) -> None:
+        if len(vertices) and not self._vertex_done[vertices].all():
+            self.vertex_at(vertices)
+        if len(edges) and not self._edge_done[edges].all():
+            self.edge_at(edges)
 
     def vertex_at(self, index: np.ndarray) -> np.ndarray:
         with self._lock:

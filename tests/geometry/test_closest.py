@@ -171,7 +171,11 @@ def test_query_is_the_reference_query_bit_for_bit():
     for vertices, faces in meshes:
         mesh = ClosestPoint.build(vertices, faces)
         points = _probe_points(vertices, faces, rng)
-        _assert_same(mesh.query(points), mesh.query_reference(points))
+        got = mesh.query(points)
+        _assert_same(got, mesh.query_reference(points))
+        rim = mesh.on_boundary(got)
+        np.testing.assert_array_equal(rim, mesh.on_boundary_reference(got))
+        assert rim.any() == (faces is not f)  # the open box's rim is reached, the spheres have none
 
 
 def test_query_is_the_reference_query_on_degenerate_triangles():
