@@ -291,8 +291,8 @@ class ClosestPoint:
         finish_kernel.features(self.faces, face, bary, pseudo.edge_keys, len(self.vertices), kind, index)
         pseudo.ready(index[kind == finish_kernel.VERTEX], index[kind == finish_kernel.EDGE])
         dist, signed, normal = np.empty(n), np.empty(n), np.empty((n, 3))
-        finish_kernel.finish(points, point, face, kind, index, self.fn, pseudo.vertex, pseudo.edge, dist, signed,
-                             normal)  # fmt: skip
+        finish_kernel.finish(points, point, face, kind, index, self.fn, pseudo.vertex, pseudo.edge, dist,
+                             signed, normal)  # fmt: skip
         return Closest(face, bary, point, dist, signed, normal)
 
 
