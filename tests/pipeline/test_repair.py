@@ -108,7 +108,7 @@ def test_kept_queries_answer_as_fresh_ones_after_some_vertices_move():
 
 def test_diffusion_on_the_free_rows_is_the_whole_product_bit_for_bit():
     from service.pipeline.fit import dilate, vertex_neighbours
-    from service.pipeline.repair import diffuse
+    from service.pipeline.repair import diffuse, diffuse_reference
 
     v, f = _sheet(15, 0.3, lambda v: 0.0 * v[:, 0])
     adjacency = vertex_neighbours(f, len(v))
@@ -123,6 +123,8 @@ def test_diffusion_on_the_free_rows_is_the_whole_product_bit_for_bit():
         mean = (adjacency @ expected) / np.maximum(degree, 1)[:, None]
         expected = np.where((region & ~held)[:, None], mean, expected)
     np.testing.assert_array_equal(diffuse(u, held, region, adjacency, 8), expected)
+    np.testing.assert_array_equal(diffuse_reference(u, held, region, adjacency, 8), expected)
+    assert np.abs(expected - u).max() > 0.01  # it spread
 
 
 def test_a_query_subset_holding_every_violation_repairs_as_all_near_vertices_do():
