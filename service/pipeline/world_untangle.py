@@ -265,7 +265,8 @@ def _repair(models, layer_ids, beta, body: ClosestPoint, explicit, fitted, fit_w
         if i == len(world) - 1:
             break  # no layer over it
         # Its faces turned against the body, the same for every layer over it.
-        turned = models.anchors(layer_ids[i + 1]).reversed_faces(out[-1], f, body.vertices, body.faces)
+        anchors = models.anchors(layer_ids[i + 1])
+        turned = anchors.reversed_faces(out[-1], f, body.vertices, body.faces, body.fn)
         inner.append((ClosestPoint.build(out[-1], f), False, moved, turned))
         # Its closest points for the garments two or more over it, nearest first, while the ones between
         # are repaired: their first round asks every near vertex, where the squeeze left it.

@@ -189,3 +189,16 @@ def test_a_pass_with_faults_deepens_the_squeeze_around_them_on_the_inner_garment
     np.testing.assert_allclose(deep[0][rings], 0.002 + DEEPEN)
     np.testing.assert_array_equal(deep[0][~rings], 0.002)
     np.testing.assert_array_equal(deep[1], 0.002)
+
+
+def test_the_compiled_reversed_faces_are_the_numpy_ones_bit_for_bit():
+    body_v, body_f = _box_body()
+    v, f, _ = _z_fold()
+    anchors = BodyAnchors.build(v, ClosestPoint.build(body_v, body_f))
+    rng = np.random.default_rng(3)
+    crumpled = v + rng.normal(scale=0.01, size=v.shape)  # faces turned every which way
+    ref = anchors.reversed_faces_reference(crumpled, f, body_v, body_f)
+    assert 0.1 < ref.mean() < 0.9
+    np.testing.assert_array_equal(anchors.reversed_faces(crumpled, f, body_v, body_f), ref)
+    normals = ClosestPoint.build(body_v, body_f).fn
+    np.testing.assert_array_equal(anchors.reversed_faces(crumpled, f, body_v, body_f, normals), ref)
