@@ -341,12 +341,22 @@ class KeptQueries:
         """(signed distance (K,), closest point (K, 3), face normal (K, 3), closest point on the mesh's
         rim (K,) bool) at the points ``ask (K,)`` of ``x (n, 3)``, querying only those that moved since
         they were last asked (``ClosestPoint.query``'s ``split``)."""
+        ask = self._refresh(x, ask, split)
+        return self.signed[ask], self.point[ask], self.normal[ask], self.rim[ask]
+
+    def signed_at(self, x: np.ndarray, ask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``at``'s signed distances and rim flags alone (the squeeze reads no closest point or normal)."""
+        ask = self._refresh(x, ask, True)
+        return self.signed[ask], self.rim[ask]
+
+    def _refresh(self, x: np.ndarray, ask: np.ndarray, split: bool) -> np.ndarray:
+        """Query the points ``ask`` of ``x`` that moved since they were last asked; ``ask`` as int64."""
         ask = np.ascontiguousarray(ask, dtype=np.int64)
         stale = np.empty(len(ask), dtype=np.int64)
         stale = stale[: _moved(np.ascontiguousarray(x, dtype=np.float64), self.points, ask, stale)]
         if len(stale):
             self.store(x, stale, self.mesh.query(x[stale], split))
-        return self.signed[ask], self.point[ask], self.normal[ask], self.rim[ask]
+        return ask
 
     def store(self, x: np.ndarray, idx: np.ndarray, q: Closest) -> None:
         """Keep ``q``, the mesh's answer for the points ``idx (K,)`` of ``x (n, 3)`` (asked by the

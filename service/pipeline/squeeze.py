@@ -153,7 +153,7 @@ def beyond(x: np.ndarray, anchors: np.ndarray, outer: Outer, kept: KeptQueries) 
     ``benchmarks.orders --pairs``' three bodies, 0 with every vertex asked. The caller adds those
     found to ``near``."""
     covered = np.flatnonzero(outer.covered)
-    far = covered[kept.at(x, covered)[0] > 0] if len(covered) else covered
+    far = covered[kept.signed_at(x, covered)[0] > 0] if len(covered) else covered
     ask = np.union1d(np.flatnonzero(~outer.covered), far)
     out = np.zeros(len(x), dtype=bool)
     if len(ask):
@@ -209,7 +209,7 @@ def _pulls(x: np.ndarray, outer: Outer, kept: KeptQueries, body: KeptQueries, fl
     cand = np.flatnonzero(outer.near & outer.covered)
     if not len(cand):
         return cand, np.zeros((0, 3))
-    signed_out, _, _, rim = kept.at(x, cand)
+    signed_out, rim = kept.signed_at(x, cand)
     far = outer.beyond[cand] if outer.beyond is not None else np.zeros(len(cand), dtype=bool)
     under = signed_out < settings.band
     if settings.past_rim:
