@@ -38,6 +38,13 @@ from service.pipeline.layering import STEP, BodySlices, GarmentProfile, junction
 EXTRA = 0.04
 """m: how far below the inner garment's junction the outer one's comes down (room for both cloths; 2
 cm left the jacket under the T-shirt crossing on one of ``benchmarks.orders --pairs``' three bodies)."""
+ROOMS = (EXTRA, 0.06, 0.10)
+"""m: the rooms an outfit with a garment let down is made with, in turn, while the one before left it
+crossing (``service.pipeline.outfit.make_outfit``). Which room leaves a stack with the jacket under a
+tighter top clean is a matter of millimetres upstream: ``benchmarks.orders --stacks 100`` with 4 cm,
+then with 6 cm, left different stacks crossing (seed 7: 7 and 3 of 85, 2 in both; seed 8: 3 and 4 of
+84, none in both; ``--let-down``: 3 and 2 of 60, 1 in both); of the three left after both, 10 cm
+made two clean (8 cm one). More room is a lower armhole on the outer top, so it is tried last."""
 RADIUS = 1.5
 """The bump's radius per metre of drop (at least ``MIN_RADIUS``): the cloth around the saddle comes
 down with it, so the drop spreads over the sleeve and the side instead of pulling one vertex."""
@@ -63,19 +70,19 @@ def saddles(parts: frozenset[int], centres: np.ndarray, names: list[str]) -> lis
 
 
 def lowering(inner: GarmentProfile, outer: GarmentProfile, body: BodySlices, outer_vertices: np.ndarray,
-             between: int = 0, length: int | None = None):  # fmt: skip
+             between: int = 0, length: int | None = None, extra: float = EXTRA):  # fmt: skip
     """``(V, 3)`` displacement of the outer garment's canonical ``outer_vertices (V, 3)`` (its drape on
     the mean body, of which ``outer`` is the profile) that brings its junctions ``EXTRA`` below the
     inner garment's (``inner``'s profile), or None where the inner one's hangs no lower. ``between``:
     garments between the two that were let down around the inner one too; each of their junctions
     takes its own ``EXTRA`` below it, and this one comes down below all of them. ``length``: the run
     (levels) on the body the garments are worn on (``body_run``) instead of the drapes' own; the bump
-    stays where the drapes put it."""
+    stays where the drapes put it. ``extra``: the room in place of ``EXTRA`` (``ROOMS``)."""
     run = junction_run(inner, outer, body)
     if run is None:
         return None
     drapes_length, k, parts = run
-    drop = (drapes_length if length is None else length) * STEP + EXTRA * (1 + between)
+    drop = (drapes_length if length is None else length) * STEP + extra * (1 + between)
     z_saddle = body.levels[k] + STEP  # the first level where the outer garment joins the parts
     radius = max(RADIUS * drop, MIN_RADIUS)
     out = np.zeros_like(outer_vertices)

@@ -84,16 +84,18 @@ class OutfitModels:
         return self._anchors[layer_id]
 
     def lowering(self, inner_id: str, outer_id: str, between: int = 0,
-                 on: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray | None:  # fmt: skip
+                 on: tuple[np.ndarray, np.ndarray] | None = None,
+                 extra: float = junctions.EXTRA) -> np.ndarray | None:  # fmt: skip
         """The canonical displacement (V, 3) that lets ``outer_id``'s junctions down below
         ``inner_id``'s (``service.pipeline.junctions``), or None where their drapes on the mean body
         have no junction run. ``between``: garments between the two let down around ``inner_id`` too.
         ``on``: the two garments' explicit meshes on the body they are worn on (canonical, before any
         junction moved them): the drop is then that body's (``junctions.body_run``, 25-45 ms a pair in
-        a one-off timing), as every request asks; else the mean body's, made on first use (~1 ms)."""
+        a one-off timing), as every request asks; else the mean body's, made on first use (~1 ms).
+        ``extra``: the room below the inner junction (``junctions.ROOMS``)."""
         if self._junction(inner_id, outer_id)[1] is None:
             return None
-        if on is None and between == 0:
+        if on is None and between == 0 and extra == junctions.EXTRA:
             return self._junction(inner_id, outer_id)[1]
         with self._lock:  # made by _junction
             (_, inner), (drape, outer) = (self._drape_profile(g) for g in (inner_id, outer_id))
@@ -101,7 +103,7 @@ class OutfitModels:
         if on is not None:
             faces = (self.catalog[inner_id].faces, self.catalog[outer_id].faces)
             length = junctions.body_run(inner, outer, body, on[0], faces[0], on[1], faces[1])
-        return junctions.lowering(inner, outer, body, drape, between, length)
+        return junctions.lowering(inner, outer, body, drape, between, length, extra)
 
     def raising(self, inner_id: str, outer_id: str) -> junctions.Gathering | None:
         """How a top tucked into ``outer_id`` is gathered up above its crotch (``junctions.raising``), or
@@ -341,73 +343,31 @@ def make_outfit(
     t0 = time.perf_counter()
     # Each garment's explicit model and body clearance on its own thread (onnxruntime and the kernels
     # release the GIL); the same meshes as one after the other.
-    explicit = list(pool("fit", FIT_THREADS).map(
+    unshifted = list(pool("fit", FIT_THREADS).map(
         lambda g: models.clear_of_body(models.explicit[g].canonical(beta)), garment_ids))
-    unshifted = list(explicit)
     faces = [models.catalog[g].faces for g in garment_ids]
-    # An outer garment comes down around an inner one whose armhole or crotch hangs lower: the drop,
-    # in canonical space, is the same for every body (service.pipeline.junctions).
-    # A top tucked into a bottom whose crotch is higher than its hem is gathered up above it instead.
-    lowered = [0.0] * len(garment_ids)
-    around: list[set[int]] = []  # per garment, the inner garments it was let down around
-    for j, garment in enumerate(garment_ids):
-        # Each garment let down around the same inner one takes its own room below it: the outer of
-        # two tops over a jacket comes down below the inner one's junction, not to it.
-        drops = []
-        for k, inner in enumerate(garment_ids[:j]):
-            between = sum(k in around[m] for m in range(k + 1, j))
-            drops.append(models.lowering(inner, garment, between, (unshifted[k], unshifted[j])))
-        around.append({k for k, d in enumerate(drops) if d is not None})
-        for k in range(j + 1, len(garment_ids)):  # read on this body: the bottom's crotch height
-            gathering = models.raising(garment, garment_ids[k])
-            drops.append(gathering and gathering.shift(explicit[j], explicit[k]))
-        shift = junctions.combined([d for d in drops if d is not None])
-        if shift is not None:
-            explicit[j] = models.shifted_clear_of_body(explicit[j], shift)
-            lowered[j] = float(np.abs(shift).max())
     seconds["explicit"] = time.perf_counter() - t0
+    # Where a garment was let down around an inner one and the repair still left crossings, the outfit
+    # is made again with the next room below the junction (junctions.ROOMS): the usual orders, let down
+    # nowhere, are made once, and so is every outfit that comes out clean.
+    how = _How(untangle_layers, untangler, settings, body_field, repair, repair_settings)
+    attempts: list[_Attempt] = []
+    for room in junctions.ROOMS:
+        t0 = time.perf_counter()
+        explicit, lowered = _let_down(models, garment_ids, unshifted, room)
+        seconds["explicit"] += time.perf_counter() - t0
+        meshes = (unshifted, explicit, lowered)
+        attempt = _layered(models, garment_ids, beta, body, meshes, faces, seconds, how)
+        attempts.append(attempt)
+        if attempt.faults == (0, 0) or not any(lowered):
+            break
+    chosen = min(attempts, key=lambda a: a.faults)  # the first of the fewest faults
     layer_ids = [BODY, *garment_ids]
-
-    def layer_fields(k, x, gradient):
-        if k == 0 and body_field == "exact":
-            return models.body_field(x, gradient)
-        return models.fields(layer_ids[k], x, beta, gradient)
-
-    fitted, fits = list(explicit), []
-    if untangle_layers:
-        t0 = time.perf_counter()
-        op = models.untangler(untangler)
-        # Where a vertex is provably far from a layer, its field is not asked (fit.FAR_FIELD): pants
-        # and a jacket's sleeves.
-        bounds = models.far_bounds(garment_ids, unshifted, explicit)
-
-        def fit(i):
-            return fit_garment(explicit[i], faces[i], i + 1, len(layer_ids), layer_fields, op, settings,
-                               bounds[i])  # fmt: skip
-
-        # The garments' fits are independent (each against the others' explicit fields): two at a time,
-        # as numpy and onnxruntime release the GIL. The same fits as one after the other, bit for bit.
-        fits = list(pool("fit", FIT_THREADS).map(fit, range(len(explicit))))
-        fitted = [r.vertices if r.ok and np.all(np.isfinite(r.vertices)) else x0
-                  for r, x0 in zip(fits, explicit, strict=True)]  # fmt: skip
-        seconds["fit"] = time.perf_counter() - t0
-        # Per kind of work, summed over the garments (overlapping in time: they can add up to more
-        # than "fit").
-        for key in ("fields", "untangle", "optimise"):
-            seconds[key] = sum(r.seconds[key] for r in fits)
-    t0 = time.perf_counter()
-    world = models.space.to_bodies(fitted, body)
-    seconds["world"] = time.perf_counter() - t0
-    fit_world, repairs = world, []
-    if untangle_layers and repair:
-        t0 = time.perf_counter()
-        # Every layer's fields at every fitted vertex, as the fit left them (None: evaluate again).
-        cache = [r.values if r.ok else None for r in fits]
-        world, repairs = untangle_world(models, layer_ids, beta, body, explicit, (fitted, cache), world,
-                                        faces, repair_settings, lowered)  # fmt: skip
-        seconds["repair"] = time.perf_counter() - t0
+    explicit, fits, fitted, fit_world, world, repairs = (
+        chosen.explicit, chosen.fits, chosen.fitted, chosen.fit_world, chosen.world, chosen.repairs)
     outfit = Outfit(body, models.body.faces, list(zip(garment_ids, world, faces, strict=True)))
     report = {"garments": garment_ids, "beta": beta.tolist(), "untangled": untangle_layers}
+    report["attempts"] = len(attempts)
     if untangle_layers:
         report |= _fit_report(garment_ids, explicit, faces, fits, untangler)
     if repairs:
@@ -438,6 +398,117 @@ def make_outfit(
     report["seconds"] = {k: round(v, 4) for k, v in seconds.items()}
     outfit.report = report
     return outfit
+
+
+def _let_down(models: OutfitModels, garment_ids: list[str], unshifted: list[np.ndarray], room: float):
+    """(canonical explicit meshes ``(V_i, 3)`` with every junction moved, per garment how far (m) its
+    mesh moved) for the explicit meshes ``unshifted`` and ``room`` below each inner junction.
+
+    An outer garment comes down around an inner one whose armhole or crotch hangs lower
+    (``service.pipeline.junctions``, read on this body); a top tucked into a bottom whose crotch is
+    higher than its hem is gathered up above it instead."""
+    explicit = list(unshifted)
+    lowered = [0.0] * len(garment_ids)
+    around: list[set[int]] = []  # per garment, the inner garments it was let down around
+    for j, garment in enumerate(garment_ids):
+        # Each garment let down around the same inner one takes its own room below it: the outer of
+        # two tops over a jacket comes down below the inner one's junction, not to it.
+        drops = []
+        for k, inner in enumerate(garment_ids[:j]):
+            between = sum(k in around[m] for m in range(k + 1, j))
+            drops.append(models.lowering(inner, garment, between, (unshifted[k], unshifted[j]), room))
+        around.append({k for k, d in enumerate(drops) if d is not None})
+        for k in range(j + 1, len(garment_ids)):  # read on this body: the bottom's crotch height
+            gathering = models.raising(garment, garment_ids[k])
+            drops.append(gathering and gathering.shift(explicit[j], explicit[k]))
+        shift = junctions.combined([d for d in drops if d is not None])
+        if shift is not None:
+            explicit[j] = models.shifted_clear_of_body(explicit[j], shift)
+            lowered[j] = float(np.abs(shift).max())
+    return explicit, lowered
+
+
+@dataclass
+class _Attempt:
+    """One try at the layering of an outfit (``make_outfit``): per garment its explicit mesh (junctions
+    moved), fit, fitted canonical mesh, world mesh after the fit and after the repair, repair result."""
+
+    explicit: list[np.ndarray]
+    fits: list[FitResult]
+    fitted: list[np.ndarray]
+    fit_world: list[np.ndarray]
+    world: list[np.ndarray]
+    repairs: list
+
+    @property
+    def faults(self) -> tuple[int, int]:
+        """(crossing pairs, vertices inside) the repair left; (0, 0) without one."""
+        return (sum(r.crossing_pairs for r in self.repairs), sum(r.inside for r in self.repairs))
+
+
+@dataclass(frozen=True)
+class _How:
+    """``make_outfit``'s options for the fit and the repair."""
+
+    untangle_layers: bool
+    untangler: UntanglerKind
+    settings: FitSettings
+    body_field: BodyFieldKind
+    repair: bool
+    repair_settings: RepairSettings
+
+
+def _layered(models, garment_ids, beta, body, meshes, faces, seconds: dict, how: _How) -> _Attempt:
+    """The fit, the body map and the repair of one ``_let_down``'s explicit meshes: ``meshes`` is (the
+    explicit meshes before any junction moved them, after, how far each moved). The time of each stage
+    is added to ``seconds``."""
+    unshifted, explicit, lowered = meshes
+    untangle_layers, untangler, settings = how.untangle_layers, how.untangler, how.settings
+    body_field, repair, repair_settings = how.body_field, how.repair, how.repair_settings
+    layer_ids = [BODY, *garment_ids]
+
+    def layer_fields(k, x, gradient):
+        if k == 0 and body_field == "exact":
+            return models.body_field(x, gradient)
+        return models.fields(layer_ids[k], x, beta, gradient)
+
+    def add(key, value):
+        seconds[key] = seconds.get(key, 0.0) + value
+
+    fitted, fits = list(explicit), []
+    if untangle_layers:
+        t0 = time.perf_counter()
+        op = models.untangler(untangler)
+        # Where a vertex is provably far from a layer, its field is not asked (fit.FAR_FIELD): pants
+        # and a jacket's sleeves.
+        bounds = models.far_bounds(garment_ids, unshifted, explicit)
+
+        def fit(i):
+            return fit_garment(explicit[i], faces[i], i + 1, len(layer_ids), layer_fields, op, settings,
+                               bounds[i])  # fmt: skip
+
+        # The garments' fits are independent (each against the others' explicit fields): two at a time,
+        # as numpy and onnxruntime release the GIL. The same fits as one after the other, bit for bit.
+        fits = list(pool("fit", FIT_THREADS).map(fit, range(len(explicit))))
+        fitted = [r.vertices if r.ok and np.all(np.isfinite(r.vertices)) else x0
+                  for r, x0 in zip(fits, explicit, strict=True)]  # fmt: skip
+        add("fit", time.perf_counter() - t0)
+        # Per kind of work, summed over the garments (overlapping in time: they can add up to more
+        # than "fit").
+        for key in ("fields", "untangle", "optimise"):
+            add(key, sum(r.seconds[key] for r in fits))
+    t0 = time.perf_counter()
+    world = models.space.to_bodies(fitted, body)
+    add("world", time.perf_counter() - t0)
+    fit_world, repairs = world, []
+    if untangle_layers and repair:
+        t0 = time.perf_counter()
+        # Every layer's fields at every fitted vertex, as the fit left them (None: evaluate again).
+        cache = [r.values if r.ok else None for r in fits]
+        world, repairs = untangle_world(models, layer_ids, beta, body, explicit, (fitted, cache), world,
+                                        faces, repair_settings, lowered)  # fmt: skip
+        add("repair", time.perf_counter() - t0)
+    return _Attempt(explicit, fits, fitted, fit_world, world, repairs)
 
 
 def _fit_report(ids, explicit, faces, fits: list[FitResult], untangler: str) -> dict:

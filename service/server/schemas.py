@@ -144,7 +144,9 @@ class OutfitCreated(BaseModel):
         description="Quality report: garments, beta, untangling statistics, `collision_free` (no "
         "triangle pairs crossing between layers and no vertex left inside an inner layer after the "
         "repair; `crossing_pairs` counts what is left), `numerical_fallback` (garments served unfitted "
-        "after a numerical fault), `seconds` per pipeline stage."
+        "after a numerical fault), `attempts` (how many times the outfit was made: more than 1 where a "
+        "garment let down around an inner one's lower junction came out crossing and was made again "
+        "with more room), `seconds` per pipeline stage."
     )
 
 

@@ -119,3 +119,18 @@ def test_drops_and_rises_combine_per_vertex():
     down, up = np.zeros((3, 3)), np.zeros((3, 3))
     down[:, 2], up[:, 2] = [-0.1, 0.0, -0.02], [0.0, 0.05, 0.03]
     np.testing.assert_allclose(junctions.combined([down, up])[:, 2], [-0.1, 0.05, 0.01])
+
+
+def test_a_room_in_place_of_extra_comes_down_that_much_further(legs_body):
+    # junctions.ROOMS: an outfit left crossing is made again with more room below the junction; the
+    # drop is the run plus the room, once per garment let down around the same inner one.
+    parts = (tube(0.18, 0.8, 1.05), tube(0.08, 0.1, 0.8, -0.09), tube(0.08, 0.1, 0.8, 0.09))
+    pants_v, _ = closed(*parts)
+    pants = profile("pants", legs_body, *parts)
+    mini = profile("mini", legs_body, tube(0.22, 0.77, 1.05))
+    run = junction_run(mini, pants, legs_body)[0]
+    assert junctions.ROOMS[0] == junctions.EXTRA and list(junctions.ROOMS) == sorted(set(junctions.ROOMS))
+    for room in junctions.ROOMS:
+        for between in (0, 1):
+            drop = junctions.lowering(mini, pants, legs_body, pants_v, between, extra=room)
+            assert -drop[:, 2].min() == pytest.approx(run * STEP + room * (1 + between))

@@ -289,3 +289,43 @@ def test_a_garment_let_down_far_is_cleared_of_the_body_on_the_way(models, held_o
     small = np.where(still[:, None], 0.0, np.array([0.0, 0.0, -0.5 * SHIFT_STEP]))  # one step: as before
     once = models.clear_of_body(tshirt + small)
     np.testing.assert_array_equal(models.shifted_clear_of_body(tshirt, small), once)
+
+
+@pytest.mark.parametrize("left, chosen", [((5, 3, 4), 1), ((3, 5, 4), 0), ((0, 5, 5), 0), ((5, 4, 0), 2)])
+def test_a_let_down_outfit_left_crossing_is_made_again_with_the_next_room(models, monkeypatch, left, chosen):
+    # The jacket under the T-shirt is let down; where the repair leaves crossings (stubbed: ``left`` per
+    # attempt), the outfit is made again with junctions.ROOMS' next room, and the attempt with the fewest
+    # faults is what comes back, meshes and report; a clean first attempt is the only one.
+    from service.pipeline import junctions, outfit
+    from service.pipeline.repair import RepairResult
+
+    rooms, calls = [], []
+    lowering = models.lowering
+    monkeypatch.setattr(models, "lowering", lambda *a: rooms.append(a[4]) or lowering(*a))
+
+    def untangle_world(models_, layer_ids, beta, body, explicit, fitted, world, faces, settings, lowered):
+        n = left[len(calls)]
+        calls.append(([x.copy() for x in explicit], world))
+        out = [x + len(calls) for x in world]  # tells the attempts apart
+        crossing = [0] * (len(out) - 1) + [n]  # all on the outermost garment
+        return out, [RepairResult(x, np.zeros(len(x), bool), 1, c, 0)
+                     for x, c in zip(out, crossing, strict=True)]
+
+    monkeypatch.setattr(outfit, "untangle_world", untangle_world)
+    beta = sample_betas(2, 3)[1]
+    ids = ["jacket", "tshirt"]
+    r = make_outfit(models, ids, beta, measure=False)
+    assert len(junctions.ROOMS) == len(left)
+    attempts = next((k + 1 for k, n in enumerate(left) if n == 0), len(left))  # up to the first clean one
+    assert r.report["attempts"] == len(calls) == attempts
+    assert sorted(set(rooms)) == sorted(junctions.ROOMS[:attempts])
+    assert r.report["crossing_pairs"] == left[chosen]
+    for (_, x, _), fitted in zip(r.garments, calls[chosen][1], strict=True):
+        np.testing.assert_array_equal(x, fitted + (chosen + 1))
+    if attempts > 1:  # the next room let the T-shirt down further
+        assert (calls[0][0][1] - calls[1][0][1])[:, 2].max() > 0.01
+    calls.clear()
+    # Let down nowhere: made once, crossings or not.
+    left = (5, 3, 4)
+    assert make_outfit(models, ["tank_top", "tshirt"], beta, measure=False).report["attempts"] == 1
+    assert len(calls) == 1
