@@ -7,6 +7,7 @@ Run (a minute or two each)::
     python -m benchmarks.orders --stacks 100 [--seed 7]        # random stacks of 3-4, held-out + corners
     python -m benchmarks.orders --junctions                    # armholes and crotches, template vs drape
     python -m benchmarks.orders --let-down [--bodies 1]        # pairs let down at a junction, 4 corners
+    python -m benchmarks.orders --refusals                     # share of all 3-4 stacks refused (~1.5 min)
 
 The default: ``--outfits`` outfits of 1-4 catalog garments in random order (many of them orders cloth
 cannot take: shorts over a skirt, a T-shirt over a jacket) on held-out body shapes (a Sobol seed no
@@ -167,6 +168,21 @@ def stacks(models: OutfitModels, args) -> None:
     _table(f"{args.stacks} random stacks of 3-4 garments (the first 4 on the box's corners)", runs)
 
 
+def refusal_rates(models: OutfitModels) -> None:
+    """The share of every ordered stack of 3 and of 4 distinct catalog garments that the layering rule
+    refuses: what ``--stacks`` (sizes 3 and 4 equally likely, any order) refuses on average."""
+    print("## Stacks the layering rule refuses, over every ordered stack of the catalog")
+    print("| garments | stacks | refused | share % |")
+    print("|---:|---:|---:|---:|")
+    shares = []
+    for size in (3, 4):
+        stacks = list(itertools.permutations(sorted(models.catalog), size))
+        refused = sum(bool(models.refusals(list(ids))) for ids in stacks)
+        shares.append(refused / len(stacks))
+        print(f"| {size} | {len(stacks)} | {refused} | {100 * shares[-1]:.1f} |")
+    print(f"\nexpected share of --stacks refused: {100 * np.mean(shares):.1f} %")
+
+
 def junctions(models: OutfitModels) -> None:
     from service.pipeline.body import DEFAULT_BETA
     from service.pipeline.layering import GarmentProfile, junction_run
@@ -204,6 +220,7 @@ def main(argv=None) -> None:
     parser.add_argument("--stacks", type=int, default=0, help="random stacks of 3-4 garments (issue 21)")
     parser.add_argument("--junctions", action="store_true", help="armhole and crotch depths, no outfits")
     parser.add_argument("--let-down", action="store_true", help="pairs let down at a junction, 4 corners")
+    parser.add_argument("--refusals", action="store_true", help="share of all 3-4 stacks refused, no outfits")
     args = parser.parse_args(argv)
     models = OutfitModels.load()
     if args.junctions:
@@ -214,7 +231,9 @@ def main(argv=None) -> None:
         let_down(models, args)
     if args.stacks:
         stacks(models, args)
-    if not (args.pairs or args.stacks or args.junctions or args.let_down):
+    if args.refusals:
+        refusal_rates(models)
+    if not (args.pairs or args.stacks or args.junctions or args.let_down or args.refusals):
         random_orders(models, args)
 
 

@@ -36,7 +36,7 @@ from service.pipeline.squeeze import BodyAnchors
 from service.pipeline.strain import RestShape, green_strain_norms
 from service.pipeline.untangle import untangle_with_jacobian
 from service.pipeline.untangle_onnx import N_SLOTS, NeuralUntangler
-from service.pipeline.world_untangle import untangle_world
+from service.pipeline.world_untangle import repair_faults, untangle_world
 from service.process.threads import pool
 
 UntanglerKind = Literal["neural", "reference"]
@@ -443,7 +443,7 @@ class _Attempt:
     @property
     def faults(self) -> tuple[int, int]:
         """(crossing pairs, vertices inside) the repair left; (0, 0) without one."""
-        return (sum(r.crossing_pairs for r in self.repairs), sum(r.inside for r in self.repairs))
+        return repair_faults(self.repairs)
 
 
 @dataclass(frozen=True)

@@ -100,7 +100,7 @@ def untangle_world(models, layer_ids, beta, body, explicit, fitted, world, faces
             out, results = _repair(models, layer_ids, beta, body_mesh, *meshes, settings, lowered)
             # Crossings first: a vertex left inside an inner layer is within the quality bound (0.1 %)
             # long before a crossing pair is.
-            faults = (sum(r.crossing_pairs for r in results), sum(r.inside for r in results))
+            faults = repair_faults(results)
             if best is None or faults < best[0]:
                 best = (faults, out, results)
             if faults == (0, 0):
@@ -110,6 +110,12 @@ def untangle_world(models, layer_ids, beta, body, explicit, fitted, world, faces
             _deepen(results, faces, chain.deep, chain.pressed)
             chain.start = out if chain.way.from_repaired else world
     return best[1], best[2]
+
+
+def repair_faults(results) -> tuple[int, int]:
+    """(crossing pairs, vertices inside) left by an outfit's ``RepairResult``s: compared as a tuple,
+    crossings first."""
+    return (sum(r.crossing_pairs for r in results), sum(r.inside for r in results))
 
 
 @dataclass

@@ -74,3 +74,27 @@ def test_the_let_down_table_takes_the_pairs_with_a_lowering_on_every_corner(mode
     assert len(bodies) == 5 and {tuple(c) for c in corners()} <= bodies
     assert len(asked) == 5 * len(pairs)
     assert "Pairs let down at a junction" in capsys.readouterr().out
+
+
+def test_the_refusal_rates_count_every_ordered_stack(capsys):
+    # A catalog of four where a skirt under pants is refused: every ordered stack is asked, once.
+    import itertools
+    from types import SimpleNamespace
+
+    from benchmarks.orders import refusal_rates
+
+    catalog = {"pants": 0, "skirt": 0, "tshirt": 0, "jacket": 0}
+
+    def refusals(ids):
+        return ["no"] if "skirt" in ids and "pants" in ids[ids.index("skirt") + 1:] else []
+
+    refusal_rates(SimpleNamespace(catalog=catalog, refusals=refusals))
+    out = capsys.readouterr().out
+    expected = []
+    for size in (3, 4):
+        stacks = list(itertools.permutations(catalog, size))
+        refused = sum(bool(refusals(list(s))) for s in stacks)
+        assert f"| {size} | {len(stacks)} | {refused} | {100 * refused / len(stacks):.1f} |" in out
+        expected.append(refused / len(stacks))
+    assert expected == [6 / 24, 12 / 24]  # both in a 3-stack: 6 of 24 orders; in a 4-stack: half
+    assert f"expected share of --stacks refused: {100 * sum(expected) / 2:.1f} %" in out
