@@ -13,6 +13,7 @@ from service.pipeline.repair import (
     _clear_of,
     _clear_of_reference,
     _faces_around,
+    lifts,
     repair_layer,
 )
 from tests.meshes import grid_mesh
@@ -47,6 +48,80 @@ def test_a_sheet_crossing_an_inner_sheet_is_lifted_above_it_and_only_there():
     far = np.linalg.norm(outer_v[:, :2], axis=1) > 0.08
     np.testing.assert_array_equal(r.vertices[far], outer_v[far])
     assert r.moved.any() and not r.moved[far].any()
+
+
+def test_lifted_corners_end_margin_above_the_inner_triangle_along_its_layers_normal():
+    rng = np.random.default_rng(3)
+    settings = RepairSettings(lift=1.0)  # no cap
+    f = np.array([[0, 1, 2]])
+    checked = 0
+    for _ in range(300):
+        # A wide inner triangle, tilted at random, and a small outer one at random around its middle:
+        # every corner's closest point is on the inner triangle's face.
+        tilt = np.linalg.qr(rng.normal(size=(3, 3)))[0]
+        inner_v = np.array([[-1.0, -1, 0], [1, -1, 0], [0, 1, 0]]) * 0.2 @ tilt.T
+        outer_v = rng.normal(scale=0.02, size=(3, 3))
+        if not len(intersecting_pairs(outer_v, f, inner_v, f)):
+            continue
+        checked += 1
+        layer = Inner(ClosestPoint.build(inner_v, f), False, _everywhere(3), _everywhere(3))
+        crossing = (outer_v, layer)
+        at, moves = lifts(outer_v, [f], [np.array([[0, 0]])], [(layer, np.array([0]))], settings)
+        normal = layer.mesh.fn[0]
+        top = (inner_v @ normal).max()
+        below = outer_v @ normal < top + settings.margin
+        np.testing.assert_array_equal(at, np.flatnonzero(below))  # only the corners below move
+        np.testing.assert_allclose(np.cross(moves, normal), 0.0, atol=1e-12)  # along the normal
+        lifted = outer_v.copy()
+        lifted[at] += moves
+        np.testing.assert_allclose(lifted[at] @ normal, top + settings.margin, atol=1e-12)
+        assert not len(intersecting_pairs(lifted, f, inner_v, f))
+    assert checked > 20
+    capped = RepairSettings(lift=0.001)
+    outer_v, layer = crossing
+    at, moves = lifts(outer_v, [f], [np.array([[0, 0]])], [(layer, np.array([0]))], capped)
+    assert len(at) and np.linalg.norm(moves, axis=1).max() <= capped.lift + 1e-12
+
+
+def test_a_corner_lifts_along_the_outer_side_of_a_reversed_inner_face():
+    f = np.array([[0, 1, 2]])
+    inner_v = np.array([[-0.1, -0.1, 0], [0.1, -0.1, 0], [0, 0.1, 0]])
+    outer_v = np.array([[0.0, 0, -0.01], [0.01, 0, 0.01], [0, 0.01, 0.01]])
+    mesh = ClosestPoint.build(inner_v, f)
+    for turned, up in ((None, 1.0), (np.array([True]), -1.0)):
+        layer = Inner(mesh, False, _everywhere(3), _everywhere(3), reversed_faces=turned)
+        pair = [np.array([[0, 0]])]
+        at, moves = lifts(outer_v, [f], pair, [(layer, np.array([0]))], RepairSettings(lift=1.0))
+        assert len(at) and np.all(np.sign(moves[:, 2]) == up)
+
+
+def test_a_corner_in_several_pairs_takes_its_largest_lift():
+    f = np.array([[0, 1, 2]])
+    # Two wide flat inner triangles at heights 1 cm and 3 cm, both crossed by one steep outer triangle.
+    low = np.array([[-1.0, -1, 0.01], [1, -1, 0.01], [0, 1, 0.01]]) * [0.05, 0.05, 1]
+    inner_v, inner_f = np.concatenate([low, low + [0, 0, 0.02]]), np.array([[0, 1, 2], [3, 4, 5]])
+    outer_v = np.array([[0.0, 0.0, 0.0], [0.01, 0.0, 0.05], [0.0, 0.01, 0.05]])
+    assert len(intersecting_pairs(outer_v, f, inner_v, inner_f)) == 2
+    layer = Inner(ClosestPoint.build(inner_v, inner_f), False, _everywhere(3), _everywhere(3))
+    settings = RepairSettings(lift=1.0)
+    at, moves = lifts(outer_v, [f], [np.array([[0, 0], [0, 1]])], [(layer, np.array([0, 1]))], settings)
+    np.testing.assert_array_equal(at, [0])  # the two corners above both stay
+    np.testing.assert_allclose(moves, [[0.0, 0.0, 0.03 + settings.margin]], atol=1e-12)
+
+
+def test_a_fold_poking_between_the_corners_of_a_coarse_outer_sheet_is_lifted_clear_at_once():
+    # A 5 mm wide ridge 2 cm high under an outer sheet of 4 cm triangles 1 cm above the flat part: the
+    # ridge pokes between corners past every margin, as a jacket's armpit fold through a tank top.
+    inner_v, inner_f = _sheet(80, 0.4, lambda v: 0.02 * np.exp(-((v[:, 0] / 0.005) ** 2)))
+    outer_v, outer_f = _sheet(9, 0.36, lambda v: 0.01 + 0.0 * v[:, 0])
+    assert len(intersecting_pairs(outer_v, outer_f, inner_v, inner_f)) > 0
+    n = len(outer_v)
+    inner = [Inner(ClosestPoint.build(inner_v, inner_f), False, _everywhere(n), _everywhere(n))]
+    lifted = repair_layer(outer_v, outer_f, inner, RepairSettings(rounds=3))
+    assert lifted.crossing_pairs == 0
+    assert len(intersecting_pairs(lifted.vertices, outer_f, inner_v, inner_f)) == 0
+    kicked = repair_layer(outer_v, outer_f, inner, RepairSettings(rounds=3, lift=0.0))
+    assert kicked.crossing_pairs > 0  # kicked along its own normal, 2 mm a round, it is still through
 
 
 def test_an_uncovered_inner_layer_leaves_the_vertices_below_it_alone():
