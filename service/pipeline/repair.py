@@ -327,12 +327,18 @@ def repair_layer(
         # sleeve, a T-shirt's hem inside the pants): the corners are lifted clear of the inner triangles
         # they cross (``lifts``), and those it leaves bulge out along the layer's own normal.
         bulge = kick > 0
+        if len(lift_at):
+            # A corner that a push also moves takes the larger of the two: a pants corner pushed out of
+            # a tucked T-shirt's hem and lifted clear of it as well went 3 ways at once; lifted in place
+            # of a push it made spikes (tshirt < jacket < pants < long sleeve: 0 -> 9 pairs), pushed
+            # in place of a lift it left a tank top's hem through a T-shirt's (0 -> 67).
+            free = ~held[lift_at] | (np.linalg.norm(lift, axis=1) > np.linalg.norm(u[lift_at], axis=1))
+            u[lift_at[free]] = lift[free]
+            held[lift_at[free]] = True
+            bulge[lift_at[free]] = False
         if bulge.any():
             u[bulge] += kick[bulge, None] * vertex_normals(x, faces)[bulge]
             held |= bulge
-        if len(lift_at):
-            u[lift_at] = lift
-            held[lift_at] = True
         if held.any():
             region = dilate(held, adjacency, settings.ring)
             u = diffuse(u, held, region, adjacency, settings.smoothing)
@@ -363,7 +369,6 @@ def repair_layer(
             if settings.lift > 0:
                 inner_faces = [(layer, around) for layer, (_, around) in zip(inner, built, strict=True)]
                 lift_at, lift = lifts(x, [faces[t] for t in tested], hits, inner_faces, settings)
-                kick[lift_at] = 0.0  # lifted clear instead
     if built is None:  # no round ran
         built = [p.result() for p in pending]
     places = [(h[:, 1].copy(), w) for h, w in zip(hits, inside_at, strict=True)]
