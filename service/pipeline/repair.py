@@ -328,10 +328,10 @@ def repair_layer(
         # they cross (``lifts``), and those it leaves bulge out along the layer's own normal.
         bulge = kick > 0
         if len(lift_at):
-            # A corner that a push also moves takes the larger of the two: a pants corner pushed out of
-            # a tucked T-shirt's hem and lifted clear of it as well went 3 ways at once; lifted in place
-            # of a push it made spikes (tshirt < jacket < pants < long sleeve: 0 -> 9 pairs), pushed
-            # in place of a lift it left a tank top's hem through a T-shirt's (0 -> 67).
+            # A corner that a push also moves takes the larger of the two. Lifted in place of every
+            # push, the pants over a tucked T-shirt's hem tore into spikes (tshirt < jacket < pants <
+            # long sleeve: 0 -> 9 pairs); pushed in place of every lift, a tank top's hem stayed
+            # through a T-shirt's (skirt < jacket < tshirt < tank top: 0 -> 67).
             free = ~held[lift_at] | (np.linalg.norm(lift, axis=1) > np.linalg.norm(u[lift_at], axis=1))
             u[lift_at[free]] = lift[free]
             held[lift_at[free]] = True
