@@ -413,7 +413,7 @@ def lifts(
             continue
         outer_corners = tested_faces[n][hits[n][:, 0]].ravel()  # (3P,)
         face = np.repeat(around[hits[n][:, 1]], 3)  # (3P,) the inner face each corner's pair crosses
-        # Each corner's outward direction: the inner layer's normal at its closest point.
+        # Each corner's direction: the mean of the outward normals of the inner faces its pairs cross.
         face_normal = layer.mesh.fn[face]
         if layer.reversed_faces is not None:
             face_normal = np.where(layer.reversed_faces[face][:, None], -face_normal, face_normal)
