@@ -326,11 +326,15 @@ class KeptQueries:
     between calls: a point that did not move gets its last answer (the query is a function of the
     point alone), so the repair's and the squeeze's rounds only ask for what they moved."""
 
-    def __init__(self, mesh: ClosestPoint, n: int, reversed_faces: np.ndarray | None = None):
+    def __init__(self, mesh: ClosestPoint, n: int, reversed_faces: np.ndarray | None = None, sides=None):
         self.mesh = mesh
         self.reversed = reversed_faces
-        """(F,) bool or None: faces whose outside is against their winding (a fold's middle sheet), whose
-        signed distances and normals are kept turned over."""
+        """(F,) bool or None: faces that may face the body (a fold's middle sheet). Without ``sides``, the
+        signed distances and normals of the points closest to them are kept turned over."""
+        self.sides = sides
+        """``service.geometry.fold_side.FoldSides`` of ``mesh``, or None. Given, the points within its
+        band whose closest face is one of ``reversed`` take their side from it: turned over where the
+        winding disagrees, so that the normal points to the side the parity calls outside."""
         self.points = np.full((n, 3), np.nan)  # NaN: never asked
         self.signed = np.zeros(n)
         self.point = np.zeros((n, 3))
@@ -365,7 +369,12 @@ class KeptQueries:
         self.signed[idx], self.point[idx], self.normal[idx] = q.signed, q.point, q.normal
         self.rim[idx] = self.mesh.on_boundary(q)
         if self.reversed is not None:
-            turned = idx[self.reversed[q.face]]
+            facing = self.reversed[q.face]
+            if self.sides is not None:
+                ask = np.flatnonzero(facing & (q.distance < self.sides.band))
+                facing = np.zeros(len(idx), dtype=bool)
+                facing[ask] = self.sides.inside(x[idx[ask]]) != (q.signed[ask] < 0)
+            turned = idx[facing]
             self.signed[turned] *= -1
             self.normal[turned] *= -1
 

@@ -22,7 +22,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from service.geometry.closest import ClosestPoint
-from service.geometry.intersections import TriangleGrid, intersecting_pairs, segment_crossings
+from service.geometry.fold_side import inside_by_parity
+from service.geometry.intersections import TriangleGrid, intersecting_pairs
 
 PENETRATION_BAND = 0.05  # m
 
@@ -56,7 +57,7 @@ def penetration(layers: list[Layer], h_at: Callable[[int, int], np.ndarray],
                 turned = np.flatnonzero(reversed_at(i)[q.face] & (q.distance < PENETRATION_BAND))
                 if len(turned):
                     grid = TriangleGrid.build(layers[i].vertices, layers[i].faces)
-                    inside[turned] = segment_crossings(grid, on_body.point[turned], x[turned]) % 2 == 0
+                    inside[turned] = inside_by_parity(grid, on_body.point[turned], x[turned])
             wrong |= inside & (q.distance < PENETRATION_BAND) & (h_at(i, j) < 0) & ~closest[i].on_boundary(q)
         out[layers[j].id] = float(wrong.mean())
     return out

@@ -28,6 +28,7 @@ import numpy as np
 from numba import njit
 
 from service.geometry.closest import ClosestPoint, KeptQueries
+from service.geometry.fold_side import FoldSides
 from service.geometry.intersections import TriangleGrid
 from service.geometry.mesh import vertex_normals
 from service.pipeline.fit import dilate, vertex_neighbours
@@ -57,6 +58,9 @@ class Inner:
     reversed_faces: np.ndarray | None = None
     """(F,) bool: faces of ``mesh`` whose outside (away from the body) is against their winding
     (``service.pipeline.squeeze.BodyAnchors.reversed_faces``); None: none."""
+    sides: FoldSides | None = None
+    """Its side test (``service.geometry.fold_side``) for the vertices closest to ``reversed_faces``, the
+    one ``quality.penetration`` reads; None: those faces are turned over."""
 
 
 @dataclass(frozen=True)
@@ -292,8 +296,8 @@ def repair_layer(
     # release the GIL) while the first round's pushes run: the crossing tests are the first to need them.
     pending = [pool("grids", 2).submit(grid, n, corners(n)) for n in range(len(inner))]
     built = None
-    queries = [KeptQueries(layer.mesh, len(x), layer.reversed_faces) if layer.kept is None else layer.kept
-               for layer in inner]  # fmt: skip
+    queries = [KeptQueries(layer.mesh, len(x), layer.reversed_faces, layer.sides) if layer.kept is None
+               else layer.kept for layer in inner]  # fmt: skip
     # Crossing pairs (tested triangle, inner triangle) of each layer, and the vertices they were
     # found at: a triangle none of whose vertices moved keeps its pairs (the inner layers are fixed).
     hits = [np.zeros((0, 2), dtype=np.int64) for _ in inner]

@@ -15,6 +15,7 @@ from dataclasses import dataclass, field, fields, replace
 import numpy as np
 
 from service.geometry.closest import Closest, ClosestPoint, KeptQueries, ask_ahead
+from service.geometry.fold_side import FoldSides
 from service.pipeline.fit import dilate, vertex_neighbours
 from service.pipeline.repair import REACH, Inner, RepairSettings, repair_layer
 from service.pipeline.squeeze import Outer, SqueezeSettings, asks_segment_test, squeeze_layer
@@ -220,7 +221,7 @@ def _repair(models, layer_ids, beta, body: ClosestPoint, explicit, fitted, fit_w
     squeeze (or an earlier pass) moved by d since is looked for within d more, so that the crossings
     left that the repair counts are never fewer than the returned meshes have (a loose sleeve walked
     5 cm to its anchor can end inside the arm)."""
-    inner = [(body, True, 0.0, None)]
+    inner = [(body, True, 0.0, None, None)]
     out, results = [], []
     # The body never moves, and every layer's first pushes ask it about the layer's vertices where
     # the squeeze left them: those queries go in one batch, which the query's blocks spread over both
@@ -242,14 +243,14 @@ def _repair(models, layer_ids, beta, body: ClosestPoint, explicit, fitted, fit_w
 
     def garment_inner(i: int, k: int) -> Inner:
         """Layer k (a garment under garment i, final) as garment i's repair sees it."""
-        mesh, _, moved, turned = inner[k]
+        mesh, _, moved, turned, sides = inner[k]
         f_k, h_k = _field_at(models, layer_ids, beta, fitted, k, i)
         near = np.abs(f_k) < REACH + moved + own[i]
-        return Inner(mesh, False, near, h_k < 0, reversed_faces=turned)
+        return Inner(mesh, False, near, h_k < 0, reversed_faces=turned, sides=sides)
 
     for i, (x, f) in enumerate(zip(world, faces, strict=True)):
         layers = []
-        for k, (mesh, closed, _, _) in enumerate(inner):
+        for k, (mesh, closed, *_) in enumerate(inner):
             if closed:
                 near, query = masks[i]
                 layers.append(Inner(mesh, True, near, np.ones(len(x), dtype=bool), query, kept_body[i]))
@@ -273,13 +274,15 @@ def _repair(models, layer_ids, beta, body: ClosestPoint, explicit, fitted, fit_w
         # Its faces turned against the body, the same for every layer over it.
         anchors = models.anchors(layer_ids[i + 1])
         turned = anchors.reversed_faces(out[-1], f, body.vertices, body.faces, body.fn)
-        inner.append((ClosestPoint.build(out[-1], f), False, moved, turned))
+        # Their side where those faces are closest is the measure's crossing parity (``fold_side``).
+        sides = FoldSides.build(out[-1], f, body, settings.band)
+        inner.append((ClosestPoint.build(out[-1], f), False, moved, turned, sides))
         # Its closest points for the garments two or more over it, nearest first, while the ones between
         # are repaired: their first round asks every near vertex, where the squeeze left it.
         k = len(inner) - 1
         for later in range(i + 2, len(world)) if ASK_AHEAD else ():
             layer = garment_inner(later, k)
-            layer.kept = KeptQueries(layer.mesh, len(world[later]), layer.reversed_faces)
+            layer.kept = KeptQueries(layer.mesh, len(world[later]), layer.reversed_faces, layer.sides)
             asked[(later, k)] = (layer, ask_ahead(layer.kept, world[later], np.flatnonzero(layer.near)))
     return out, results
 

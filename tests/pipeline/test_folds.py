@@ -8,7 +8,8 @@ import numpy as np
 import trimesh
 
 from service.geometry.closest import ClosestPoint, KeptQueries
-from service.geometry.intersections import intersecting_pairs
+from service.geometry.fold_side import FoldSides
+from service.geometry.intersections import intersecting_pairs, segment_crossings_reference
 from service.pipeline.quality import Layer, penetration
 from service.pipeline.repair import Inner, RepairResult, RepairSettings, repair_layer
 from service.pipeline.squeeze import BodyAnchors, Outer, SqueezeSettings, squeeze_layer
@@ -80,6 +81,58 @@ def test_kept_queries_turn_the_sign_and_normal_over_on_reversed_faces_only():
     np.testing.assert_array_equal(rim, mesh.on_boundary(q))
 
 
+def test_kept_queries_with_sides_read_the_side_by_crossing_parity_on_faces_flagged_as_facing_the_body():
+    body_v, body_f = _box_body()
+    body = ClosestPoint.build(body_v, body_f)
+    v, f, sheet = _z_fold()
+    mesh = ClosestPoint.build(v, f)
+    flagged = np.ones(len(f), dtype=bool)  # the middle sheet rightly, the others as at an armpit
+    rng = np.random.default_rng(3)
+    x = rng.uniform([-0.09, -0.04, 0.0], [0.09, 0.04, 0.03], size=(400, 3))
+    sides = FoldSides.build(v, f, body, band=0.05)
+    kept = KeptQueries(mesh, len(x), flagged, sides)
+    signed, _, normal, _ = kept.at(x, np.arange(len(x)))
+    q = mesh.query(x)
+    # The reference: the segment from each point's closest body point, against every triangle.
+    inside = segment_crossings_reference(v, f, body.query(x).point, x) % 2 == 0
+    np.testing.assert_array_equal(signed < 0, inside)
+    np.testing.assert_allclose(np.abs(signed), q.distance, rtol=0, atol=1e-15)
+    turned = np.where((signed < 0) == (q.signed < 0), 1.0, -1.0)
+    np.testing.assert_array_equal(normal, turned[:, None] * q.normal)
+    # Where the fold stacks three sheets, the parity is the analytic side: under the bottom one and
+    # between the middle and top ones inside, between the bottom and middle ones and over all outside.
+    over_fold = np.abs(x[:, 0]) < 0.025
+    z = x[:, 2]
+    expected = (z < 0.010) | ((z > 0.013) & (z < 0.016))
+    assert over_fold.sum() > 50
+    np.testing.assert_array_equal(inside[over_fold], expected[over_fold])
+    # Turning every flagged face over instead gets the flat sheets wrong.
+    flipped = KeptQueries(mesh, len(x), flagged).at(x, np.arange(len(x)))[0]
+    assert ((flipped < 0) != inside).sum() > 100
+
+
+def test_the_repair_pushes_out_a_layer_inside_a_garment_whose_faces_are_wrongly_flagged_as_facing_the_body():
+    """At an armpit the body-normal test flags faces of a sleeve's underside that lie the usual way:
+    a layer under them is inside, though turning them over says outside."""
+    body_v, body_f = _box_body()
+    inner_v, inner_f = _sheet(20, 0.4, 0.01)  # the usual way, normals away from the body
+    outer_v, outer_f = _sheet(16, 0.3, 0.006)  # 4 mm under it, inside
+    outer_v += [0.0037, 0.0023, 0]  # off the inner grid's edges: a segment through an edge crosses nothing
+    n = len(outer_v)
+    every = np.ones(n, dtype=bool)
+    settings = RepairSettings()
+    mesh = ClosestPoint.build(inner_v, inner_f)
+    flagged = np.ones(len(inner_f), dtype=bool)
+    sides = FoldSides.build(inner_v, inner_f, ClosestPoint.build(body_v, body_f), settings.band)
+    layer = Inner(mesh, False, every, every, reversed_faces=flagged, sides=sides)
+    r = repair_layer(outer_v, outer_f, [layer], settings)
+    assert r.crossing_pairs == 0 and r.inside == 0
+    assert r.vertices[:, 2].min() >= 0.01 + 0.9 * settings.margin
+    # Turned over, the faces say the layer is 4 mm outside, past the margin: it stays inside.
+    r = repair_layer(outer_v, outer_f, [Inner(mesh, False, every, every, reversed_faces=flagged)], settings)
+    assert r.vertices[:, 2].max() < 0.01
+
+
 def _points_layer(points: np.ndarray) -> Layer:
     """A "garment" of tiny triangles, one at each point (its first corner)."""
     tri = np.array([[0, 0, 0], [1e-4, 0, 0], [0, 1e-4, 0]])
@@ -127,6 +180,15 @@ def test_the_repair_lifts_a_layer_off_a_garment_worn_inside_out_instead_of_throu
     r = repair_layer(outer_v, outer_f, [turned], settings)
     assert r.crossing_pairs == 0 and r.inside == 0
     assert r.vertices[:, 2].min() >= 0.01 + 0.9 * settings.margin
+    # The crossing parity reads the same side: one sheet between the layer and the body (the layer
+    # moved off the inner grid's edges: a segment through an edge crosses nothing).
+    off = outer_v + [0.0037, 0.0023, 0]
+    flipped = repair_layer(off, outer_f, [turned], settings)
+    body = ClosestPoint.build(*_box_body())
+    turned.sides = FoldSides.build(inner_v, inner_f, body, settings.band)
+    by_parity = repair_layer(off, outer_f, [turned], settings)
+    assert by_parity.moved.all()
+    np.testing.assert_array_equal(by_parity.vertices, flipped.vertices)
     # Read by the faces' own sign the layer is "inside" and goes down through the garment.
     r = repair_layer(outer_v, outer_f, [Inner(mesh, False, every, every)], settings)
     assert r.vertices[:, 2].min() < 0.01
