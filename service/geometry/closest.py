@@ -15,6 +15,7 @@ import threading
 from concurrent.futures import Future
 from dataclasses import dataclass, fields
 from functools import cached_property
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numba import njit
@@ -24,6 +25,9 @@ from service.geometry import bvh_kernel, finish_kernel
 from service.geometry.mesh import check_mesh, face_normals
 from service.geometry.mesh_topology import LazyPseudoNormals, MeshTopology, PseudoNormals, mesh_topology
 from service.process.threads import pool
+
+if TYPE_CHECKING:  # fold_side builds on this module
+    from service.geometry.fold_side import FoldSides
 
 
 def _check_points(points: np.ndarray) -> np.ndarray:
@@ -326,7 +330,8 @@ class KeptQueries:
     between calls: a point that did not move gets its last answer (the query is a function of the
     point alone), so the repair's and the squeeze's rounds only ask for what they moved."""
 
-    def __init__(self, mesh: ClosestPoint, n: int, reversed_faces: np.ndarray | None = None, sides=None):
+    def __init__(self, mesh: ClosestPoint, n: int, reversed_faces: np.ndarray | None = None,
+                 sides: FoldSides | None = None):  # fmt: skip
         self.mesh = mesh
         self.reversed = reversed_faces
         """(F,) bool or None: faces that may face the body (a fold's middle sheet). Without ``sides``, the
