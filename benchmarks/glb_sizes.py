@@ -6,7 +6,7 @@
 One untangled outfit on the committed models (default: body + pants + tshirt + jacket, gender 0,
 180 cm, 80 kg: issue 22's), written in each encoding: bytes, bytes after gzip (level 6, what HTTP
 compression sends), the median encode time, and the decoded outfit (``service.pipeline.gltf_read``,
-meshopt views by the official decoder) measured as DESIGN.md section 7 defines it: intersecting
+meshopt views by the official decoder) measured as docs/design.md section 7 defines it: intersecting
 triangle pairs between layers (exact tests) and the penetration (largest share of any garment's
 vertices on the wrong side of an inner layer), on the meshes the GLB holds (display meshes, with
 their seam vertices). The covariant field h that penetration needs at a vertex is the one at the

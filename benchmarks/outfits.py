@@ -6,7 +6,7 @@ Run (a few minutes)::
 
 For each outfit of the end-to-end issue on ``--bodies`` held-out body shapes (a Sobol seed used by
 no training): penetration (largest share of any garment's vertices on the wrong side of an inner
-layer, DESIGN.md section 7), intersecting triangle pairs between layers (exact tests; total over all
+layer, docs/design.md section 7), intersecting triangle pairs between layers (exact tests; total over all
 layer pairs), each before (explicit meshes), after the field fit ("fit") and after the exact repair
 ("repaired", what the service returns), mean vertex displacement of the fit, mean Green strain of
 the fitted meshes against the explicit ones, and the time per stage (one request at a time, no cache).

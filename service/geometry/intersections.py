@@ -1,4 +1,4 @@
-"""Exact-predicate triangle-triangle intersection tests (quality measure, DESIGN.md section 7).
+"""Exact-predicate triangle-triangle intersection tests (quality measure, docs/design.md section 7).
 
 Two triangles intersect when an edge of one crosses the other, decided by the signs of
 orient3d determinants (float64). Candidates come from a KD-tree on triangle centroids and

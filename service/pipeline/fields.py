@@ -11,7 +11,7 @@ Per field id (a garment id, or ``body``) ``python -m training.fields`` writes in
 - ``fields.json``: per id the training config, held-out errors and the export check.
 
 x is in canonical space (metres, Anny's frame); f < 0 on the body side, h > 0 beyond the openings
-(DESIGN.md section 3). The body's h is not learned: it is always active, so ``FieldSet`` returns
+(docs/design.md section 3). The body's h is not learned: it is always active, so ``FieldSet`` returns
 h = -1 for it. This module holds the export contract (names, opset, tolerances): ``export/fields.py``
 writes to it, ``NeuralField`` reads it.
 """

@@ -1,4 +1,4 @@
-"""Fit a garment mesh to its untangled field (paper 4.2, eq. 10-12; DESIGN.md section 5), numpy + scipy.
+"""Fit a garment mesh to its untangled field (paper 4.2, eq. 10-12; docs/design.md section 5), numpy + scipy.
 
 For garment layer i with vertices X (initialised with the explicit model's mesh X*):
 
@@ -9,7 +9,7 @@ paper fits f_i(x) = 0; the learned field is ~1 mm off the explicit mesh, so fitt
 every vertex by that error. Subtracting each vertex's initial value f*_i(X*_x) makes only the
 untangling move vertices, and a vertex where nothing is tangled stays exactly where it is.
 
-The cost is the networks, so (DESIGN.md section 5):
+The cost is the networks, so (docs/design.md section 5):
 - values of every layer at every vertex find the vertices off their target (``conflict_tol``); only
   those and ``ring`` rings of neighbours are optimised, the rest stay fixed;
 - at those vertices the fields and their x-gradients are evaluated once per outer iteration and

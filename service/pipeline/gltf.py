@@ -1,4 +1,4 @@
-"""Outfits as glTF 2.0 binary (DESIGN.md section 6): metres, Y up, one node and material per layer.
+"""Outfits as glTF 2.0 binary (docs/design.md section 6): metres, Y up, one node and material per layer.
 
 Anny's frame is Z up with the body facing -Y; glTF is Y up facing +Z, so points map
 (x, y, z) -> (x, z, -y) (a rotation, no mirror: windings and normals keep their orientation).

@@ -1,4 +1,4 @@
-"""The mix-and-match pipeline (paper Figure 2, bottom row; DESIGN.md section 1), no torch.
+"""The mix-and-match pipeline (paper Figure 2, bottom row; docs/design.md section 1), no torch.
 
 beta -> body mesh; explicit garment meshes X*_i(beta) in canonical space; every layer's fields at
 every garment vertex; untangle; L-BFGS fit of each garment to its untangled field (``service.pipeline.fit``);

@@ -1,4 +1,4 @@
-"""Quality measures of an outfit (DESIGN.md section 7), on world-space meshes, numpy only.
+"""Quality measures of an outfit (docs/design.md section 7), on world-space meshes, numpy only.
 
 - penetration of garment j: the share of its vertices on the wrong side of an inner layer: inside the
   body (exact signed distance to the body mesh), or on an inner garment's body side, within

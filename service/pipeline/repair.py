@@ -2,7 +2,7 @@
 
 The field fit (``service.pipeline.fit``) untangles the layers as the learned fields see them; those are ~1-2
 mm off the meshes, and a fitted mesh can still cross an inner one by that much. This pass makes the returned
-meshes satisfy the quality measures of DESIGN.md section 7 exactly, layer by layer from the body outwards
+meshes satisfy the quality measures of docs/design.md section 7 exactly, layer by layer from the body outwards
 (inner layers are final when an outer one is repaired):
 
 1. Vertices of the layer closer than ``margin`` to an inner layer on its outer side, or on its inner

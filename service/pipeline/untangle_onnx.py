@@ -49,7 +49,7 @@ EXPORT_TOLERANCE = {"f": (2e-6, 0.0), "jacobian": (1e-4, 1e-4), "jacobian_row": 
 (its h* columns reach ~1 / h_band inside the blend band, hence the relative part); a row of it as
 the whole."""
 NEAR_SURFACE = 0.05
-"""|f*| (m) below which a field value counts as near the surface (DESIGN.md section 7)."""
+"""|f*| (m) below which a field value counts as near the surface (docs/design.md section 7)."""
 ERROR_BOUND_MM = 0.5
 """Mean |O_theta - reference| (mm) near the surface that the committed model must meet."""
 SETTLED_SLACK = 0.002

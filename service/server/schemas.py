@@ -1,4 +1,4 @@
-"""Pydantic models of the HTTP API (DESIGN.md section 6): the only place pydantic meets requests.
+"""Pydantic models of the HTTP API (docs/design.md section 6): the only place pydantic meets requests.
 
 Requests are strict (no "180" for 180, no true for 1) and closed (unknown fields are errors), so a
 typo in an option is refused instead of silently ignored. Bounds here are the widest the body model

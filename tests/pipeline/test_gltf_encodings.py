@@ -1,6 +1,6 @@
 """Every GLB encoding of a real untangled outfit (body + pants + tshirt + jacket on the committed models,
 gender 0, 180 cm, 80 kg): what a client decodes still crosses nowhere and penetrates as little as the
-plain GLB (DESIGN.md section 7's measures, as ``benchmarks.glb_sizes`` takes them), meshopt's views
+plain GLB (docs/design.md section 7's measures, as ``benchmarks.glb_sizes`` takes them), meshopt's views
 decoded by the npm package's official decoder run by node; and the Khronos validator finds 0 errors.
 """
 

@@ -1,4 +1,4 @@
-"""The HTTP contract of DESIGN.md section 6 on the committed models, and the engine's numerical
+"""The HTTP contract of docs/design.md section 6 on the committed models, and the engine's numerical
 fallbacks. Outfits here skip untangling (``options.untangle=false``): the pipeline has its own tests,
 these are about what the service does with it."""
 

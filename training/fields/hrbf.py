@@ -1,4 +1,4 @@
-"""Covariant field h of a garment (paper 3.1; DESIGN.md section 3): HRBFs fitted at its openings.
+"""Covariant field h of a garment (paper 3.1; docs/design.md section 3): HRBFs fitted at its openings.
 
 Per opening, a Hermite RBF (Macedo et al. 2011) with Wendland's compactly supported C2 kernel around
 a fixed linear part (the plane through the loop's centroid, facing out along its mean direction)
