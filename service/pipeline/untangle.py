@@ -1,4 +1,4 @@
-"""The untangling operator O(f*, h*) (paper 3.2, eq. 6; docs/design.md section 4): exact reference, numpy only.
+"""The untangling operator O(f*, h*) (paper 3.2, eq. 6; docs/design.md section 4): exact reference.
 
 Per query point, layers k = 0..N-1 are ordered inner to outer and layer 0 is the body. Inputs are the
 signed distances f*_k (metres, negative on the body side of layer k) and covariant fields h*_k; layer k
