@@ -56,7 +56,7 @@ KERNELS = (
     ("service.pipeline.canonical", "transfer_rows"),
     ("service.pipeline.strain", "_strain_kernel"),
     ("service.pipeline.strain", "_norms_kernel"),
-    ("service.pipeline.repair", "_clear_of_kernel"),
+    ("service.pipeline.collisions.repair", "_clear_of_kernel"),
     ("service.geometry.intersections", "fill"),
     ("service.geometry.intersections", "pairs"),
     ("service.geometry.intersections", "corner_boxes"),

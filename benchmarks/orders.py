@@ -29,7 +29,7 @@ Then a summary: outfits, clean ones (0 crossing pairs and at most ``PENETRATION_
 the worst of each measure and the p50 time.
 
 ``--junctions`` (seconds, no outfits): for every ordered pair, how far the inner garment's junction (an
-armhole, a crotch) hangs below the outer one's (``service.pipeline.layering.junction_run``), on the
+armhole, a crotch) hangs below the outer one's (``service.pipeline.collisions.layering.junction_run``), on the
 catalog's rest meshes (what the layering rule reads) and on the garments' drapes on the mean body (the
 explicit models at the default shape, in canonical space): a drape's armhole can hang lower than its
 template's.
@@ -43,7 +43,7 @@ import itertools
 import numpy as np
 
 from benchmarks.imported import corners
-from service.pipeline.layering import STEP
+from service.pipeline.collisions.layering import STEP
 from service.pipeline.outfit import OutfitModels, make_outfit
 from service.pipeline.strain import RestShape, green_strain_norms
 from training.drape.dataset import sample_betas
@@ -185,7 +185,7 @@ def refusal_rates(models: OutfitModels) -> None:
 
 def junctions(models: OutfitModels) -> None:
     from service.pipeline.body import DEFAULT_BETA
-    from service.pipeline.layering import GarmentProfile, junction_run
+    from service.pipeline.collisions.layering import GarmentProfile, junction_run
 
     rule = models.layering_rule()
     beta = np.asarray(DEFAULT_BETA, dtype=np.float64)

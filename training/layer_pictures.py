@@ -5,7 +5,7 @@ on a held-out body (a Sobol seed no training used) and on the box's tallest, hea
 training shape either), titled with its crossing pairs, penetration and the worst Green strain p99
 against each garment's explicit mesh (``benchmarks.orders.measured``'s measure). A tight garment over a
 looser one (the tank top over the T-shirt) presses the inner one in; one whose armholes are higher than
-the inner one's (the T-shirt over the jacket) is let down around them (``service.pipeline.junctions``);
+the inner one's (the T-shirt over the jacket) is let down around them (``collisions.junctions``);
 a top tucked into pants whose hem hangs below their crotch (the jacket) is gathered up above it.
 """
 

@@ -3,7 +3,7 @@
 beta -> body mesh; explicit garment meshes X*_i(beta) in canonical space; every layer's fields at
 every garment vertex; untangle; L-BFGS fit of each garment to its untangled field (``service.pipeline.fit``);
 the diffused body displacement carries everything to the body (world space); the squeeze and the
-exact repair of ``service.pipeline.world_untangle`` (the learned fields are millimetres off the meshes: the
+exact repair of ``service.pipeline.collisions.passes`` (the learned fields are millimetres off the meshes: the
 repair makes the returned meshes meet the measures exactly); a quality report with the measures of
 ``service.pipeline.quality`` before (explicit meshes), after the fit alone and after the repair.
 
@@ -22,21 +22,21 @@ import numpy as np
 
 from service.geometry.closest import ClosestPoint, signed_distance
 from service.geometry.sdf_grid import SdfGrid
-from service.pipeline import junctions
 from service.pipeline.body import DEFAULT_BETA, BodyModel
 from service.pipeline.canonical import CanonicalSpace
 from service.pipeline.catalog import Garment, load_catalog
+from service.pipeline.collisions import junctions
+from service.pipeline.collisions.layering import GarmentProfile, LayeringRule, Refusal
+from service.pipeline.collisions.passes import repair_faults, untangle_world
+from service.pipeline.collisions.repair import RepairSettings
+from service.pipeline.collisions.squeeze import BodyAnchors
 from service.pipeline.explicit import ExplicitModel, ExplicitOnnx
 from service.pipeline.fields import BODY, FieldSet, FieldValues
 from service.pipeline.fit import FitResult, FitSettings, fit_garment
-from service.pipeline.layering import GarmentProfile, LayeringRule, Refusal
 from service.pipeline.quality import Layer, intersections, penetration
-from service.pipeline.repair import RepairSettings
-from service.pipeline.squeeze import BodyAnchors
 from service.pipeline.strain import RestShape, green_strain_norms
 from service.pipeline.untangle import untangle_with_jacobian
 from service.pipeline.untangle_onnx import N_SLOTS, NeuralUntangler
-from service.pipeline.world_untangle import repair_faults, untangle_world
 from service.process.threads import pool
 
 UntanglerKind = Literal["neural", "reference"]
@@ -66,7 +66,7 @@ class OutfitModels:
     body_sdf: SdfGrid | None = None
     layering: LayeringRule | None = None
     _anchors: dict = field(default_factory=dict, repr=False)
-    """Which orders cloth can take (``service.pipeline.layering``); made on first use when None."""
+    """Which orders cloth can take (``service.pipeline.collisions.layering``); made on first use when None."""
     _junctions: dict = field(default_factory=dict, repr=False)
     _drapes: dict = field(default_factory=dict, repr=False)
     _gaps: dict = field(default_factory=dict, repr=False)
@@ -78,7 +78,7 @@ class OutfitModels:
         return self.layering
 
     def anchors(self, layer_id: str) -> BodyAnchors:
-        """Where the garment's vertices sit on the body (``service.pipeline.squeeze``), made once."""
+        """Where the garment's vertices sit on the body (``collisions.squeeze``), made once."""
         if layer_id not in self._anchors:
             self._anchors[layer_id] = BodyAnchors.build(self.catalog[layer_id].vertices, self.space.closest)
         return self._anchors[layer_id]
@@ -87,7 +87,7 @@ class OutfitModels:
                  on: tuple[np.ndarray, np.ndarray] | None = None,
                  extra: float = junctions.EXTRA) -> np.ndarray | None:  # fmt: skip
         """The canonical displacement (V, 3) that lets ``outer_id``'s junctions down below
-        ``inner_id``'s (``service.pipeline.junctions``), or None where their drapes on the mean body
+        ``inner_id``'s (``collisions.junctions``), or None where their drapes on the mean body
         have no junction run. ``between``: garments between the two let down around ``inner_id`` too.
         ``on``: the two garments' explicit meshes on the body they are worn on (canonical, before any
         junction moved them): the drop is then that body's (``junctions.body_run``, 25-45 ms a pair in
@@ -332,7 +332,7 @@ def make_outfit(
     """Dress the body of shape ``beta (3,)`` in ``garment_ids`` (inner to outer).
 
     With ``untangle_layers``: the field fit, then (``repair``) the exact repair of
-    ``service.pipeline.repair``.
+    ``service.pipeline.collisions.repair``.
     """
     _check_garments(models, garment_ids)
     beta = np.asarray(beta, dtype=np.float64)
@@ -405,7 +405,7 @@ def _let_down(models: OutfitModels, garment_ids: list[str], unshifted: list[np.n
     mesh moved) for the explicit meshes ``unshifted`` and ``room`` below each inner junction.
 
     An outer garment comes down around an inner one whose armhole or crotch hangs lower
-    (``service.pipeline.junctions``, read on this body); a top tucked into a bottom whose crotch is
+    (``service.pipeline.collisions.junctions``, read on this body); a top tucked into a bottom whose crotch is
     higher than its hem is gathered up above it instead."""
     explicit = list(unshifted)
     lowered = [0.0] * len(garment_ids)

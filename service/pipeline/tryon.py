@@ -121,7 +121,7 @@ def check_garment_ids(garments: tuple[str, ...], allowed: list[str], max_garment
 
 
 class RefusedOrder(InvalidField):
-    """A garment order no cloth can take (``service.pipeline.layering``): a 422 on ``garments``."""
+    """A garment order no cloth can take (``service.pipeline.collisions.layering``): a 422 on ``garments``."""
 
 
 ORDER_RULE = "an order cloth can take (README, 'Layer orders'): swap the garments named, or drop one"
@@ -129,7 +129,7 @@ ORDER_RULE = "an order cloth can take (README, 'Layer orders'): swap the garment
 
 def check_order(refusals: list) -> None:
     """Raise ``InvalidField("garments", ...)`` naming each refused pair and why
-    (``service.pipeline.layering``)."""
+    (``service.pipeline.collisions.layering``)."""
     if refusals:
         reasons = "; ".join(r.reason for r in refusals)
         raise RefusedOrder("garments", f"order refused: {reasons}", ORDER_RULE)

@@ -122,7 +122,7 @@ def test_blocked_threaded_query_is_the_single_block_query_bit_for_bit(monkeypatc
 
 
 def test_asked_ahead_answers_are_the_ones_asked_when_needed():
-    from service.geometry.closest import KeptQueries, ask_ahead
+    from service.geometry.kept_queries import KeptQueries, ask_ahead
 
     sphere = trimesh.creation.icosphere(subdivisions=3, radius=0.1)
     x = np.random.default_rng(4).normal(scale=0.12, size=(3000, 3))

@@ -1,4 +1,4 @@
-"""``service.pipeline.junctions``: where the outer garment comes down, by how much, and where not, on
+"""``collisions.junctions``: where the outer garment comes down, by how much, and where not, on
 the cylinder bodies of ``test_layering`` (the catalog's pairs: ``test_outfit``)."""
 
 from __future__ import annotations
@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from service.pipeline import junctions
-from service.pipeline.layering import STEP, junction_run
+from service.pipeline.collisions import junctions
+from service.pipeline.collisions.layering import STEP, junction_run
 from tests.pipeline import test_layering
 from tests.pipeline.test_layering import closed, profile, tube
 

@@ -10,7 +10,13 @@ import pytest
 import trimesh
 
 from service.pipeline import layering
-from service.pipeline.layering import BodySlices, GarmentProfile, LayeringRule, hull_perimeter, slice_loops
+from service.pipeline.collisions.layering import (
+    BodySlices,
+    GarmentProfile,
+    LayeringRule,
+    hull_perimeter,
+    slice_loops,
+)
 
 
 def tube(radius: float, z0: float, z1: float, x: float = 0.0, sections: int = 48) -> trimesh.Trimesh:

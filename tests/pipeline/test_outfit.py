@@ -13,7 +13,7 @@ import trimesh
 
 from benchmarks.orders import PENETRATION_LIMIT
 from service.cli import main
-from service.pipeline.junctions import EXTRA
+from service.pipeline.collisions.junctions import EXTRA
 from service.pipeline.outfit import CLEARANCE, DEFAULT_REPAIR, SHIFT_STEP, OutfitModels, make_outfit
 from service.pipeline.strain import RestShape, green_strain_norms
 from training.drape.dataset import sample_betas
@@ -155,7 +155,7 @@ def test_side_by_side_fits_equal_one_after_the_other(models, held_out_beta):
 def test_asking_ahead_gives_the_meshes_of_asking_when_needed(models, held_out_beta, monkeypatch, ids):
     # The squeeze and the repair ask some closest points ahead on a background thread: the answers
     # are functions of the points alone, so the outfit must be the one of asking each when needed.
-    import service.pipeline.world_untangle as world_untangle
+    import service.pipeline.collisions.passes as world_untangle
 
     asked = []
     ahead = world_untangle.ask_ahead
@@ -196,7 +196,7 @@ def test_the_far_bounds_are_below_the_distances_on_every_body(models, held_out_b
 @pytest.mark.parametrize("ids", [["long_sleeve", "tank_top"], ["shorts", "pants"]])
 def test_an_outer_garment_comes_down_around_a_lower_junction(models, held_out_beta, monkeypatch, ids):
     # The long sleeve's armhole hangs below the tank top's, the shorts' crotch below the pants': the
-    # outer garment is let down there (service.pipeline.junctions) and the pair comes out clean; without
+    # outer garment is let down there (collisions.junctions) and the pair comes out clean; without
     # that, the same pair on the same body crosses (164 and 40 pairs when this was written) where the
     # repair only pushes (no ``lifts``, which since clear the long sleeve's alone).
     assert models.lowering(*ids) is not None
@@ -229,7 +229,7 @@ def test_the_outer_of_two_tops_let_down_around_a_jacket_comes_down_below_the_inn
 
 def test_a_long_top_tucked_into_pants_is_gathered_above_their_crotch(models, held_out_beta, monkeypatch):
     # The jacket's hem hangs below the pants' crotch: it is gathered up above it
-    # (service.pipeline.junctions.raising), the pants keep their crotch, and the pair comes out clean
+    # (collisions.junctions.raising), the pants keep their crotch, and the pair comes out clean
     # by issue 21's measure (no crossing pair, at most 0.1 % of a garment's vertices inside: 0.00 % when
     # this was written). Without the gathering it was not (15 crossing pairs) until the repair turned
     # over the faces of a fold that face the body (issue 21's seventh round): now it is clean either way
@@ -300,8 +300,8 @@ def test_a_let_down_outfit_left_crossing_is_made_again_with_the_next_room(models
     # The jacket under the T-shirt is let down; where the repair leaves crossings (stubbed: ``left`` per
     # attempt), the outfit is made again with junctions.ROOMS' next room, and the attempt with the fewest
     # faults is what comes back, meshes and report; a clean first attempt is the only one.
-    from service.pipeline import junctions, outfit
-    from service.pipeline.repair import RepairResult
+    from service.pipeline.collisions import junctions, outfit
+    from service.pipeline.collisions.repair import RepairResult
 
     rooms, calls = [], []
     lowering = models.lowering

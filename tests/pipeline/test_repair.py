@@ -1,13 +1,14 @@
-"""The exact collision repair (service.pipeline.repair) on hand-made layers with known answers."""
+"""The exact collision repair (service.pipeline.collisions.repair) on hand-made layers with known answers."""
 
 from __future__ import annotations
 
 import numpy as np
 import trimesh
 
-from service.geometry.closest import ClosestPoint, KeptQueries
+from service.geometry.closest import ClosestPoint
 from service.geometry.intersections import intersecting_pairs
-from service.pipeline.repair import (
+from service.geometry.kept_queries import KeptQueries
+from service.pipeline.collisions.repair import (
     Inner,
     RepairSettings,
     _clear_of,
@@ -182,8 +183,8 @@ def test_kept_queries_answer_as_fresh_ones_after_some_vertices_move():
 
 
 def test_diffusion_on_the_free_rows_is_the_whole_product_bit_for_bit():
+    from service.pipeline.collisions.repair import diffuse, diffuse_reference
     from service.pipeline.fit import dilate, vertex_neighbours
-    from service.pipeline.repair import diffuse, diffuse_reference
 
     v, f = _sheet(15, 0.3, lambda v: 0.0 * v[:, 0])
     adjacency = vertex_neighbours(f, len(v))
@@ -230,7 +231,7 @@ def test_vertices_left_out_of_the_queries_are_asked_once_their_triangles_cross()
 
 
 def test_pruning_triangles_clear_of_the_inner_layer_changes_nothing(monkeypatch):
-    import service.pipeline.repair as repair
+    import service.pipeline.collisions.repair as repair
 
     inner_v, inner_f = _sheet(20, 0.4, lambda v: 0.01 * np.sin(25 * v[:, 0]))
     outer_v, outer_f = _sheet(

@@ -1,4 +1,4 @@
-"""The squeeze (service.pipeline.squeeze) on hand-made layers with known answers."""
+"""The squeeze (service.pipeline.collisions.squeeze) on hand-made layers with known answers."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import numpy as np
 
 from service.geometry.closest import ClosestPoint
 from service.geometry.intersections import intersecting_pairs
-from service.pipeline.squeeze import Outer, SqueezeSettings, squeeze_layer
+from service.pipeline.collisions.squeeze import Outer, SqueezeSettings, squeeze_layer
 from tests.meshes import grid_mesh
 
 
@@ -122,7 +122,7 @@ def test_the_segment_test_finds_cloth_the_fields_put_far_from_the_outer_layer():
 
 def test_the_segment_test_is_asked_for_looser_tops_and_for_tops_tucked_into_legged_bottoms():
     from service.pipeline.catalog import load_catalog
-    from service.pipeline.squeeze import asks_segment_test
+    from service.pipeline.collisions.squeeze import asks_segment_test
 
     catalog = dict(load_catalog())
     legged = {"pants", "shorts"}  # what LayeringRule.holds_legs_apart says of the catalog (test_layering)

@@ -14,7 +14,7 @@ their explicit meshes there, which hang lower or higher on it than on the mean b
 adds is the outer garment's, as cloth pulled over a bulkier one stretches; ``benchmarks.orders``
 reports it.
 
-Which pairs are let down, and where the bump sits, come from ``service.pipeline.layering.junction_run``
+Which pairs are let down, and where the bump sits, come from ``collisions.layering.junction_run``
 on the two garments' drapes on the mean body (the explicit models at the default shape: a drape's
 armhole hangs lower than its template's); the drop's depth from the same run on the body's explicit
 meshes, sliced near the drapes' run. It is measured on both sides of the body at once, so the drop is
@@ -33,7 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from service.pipeline.layering import STEP, BodySlices, GarmentProfile, junction_run, slice_loops
+from service.pipeline.collisions.layering import STEP, BodySlices, GarmentProfile, junction_run, slice_loops
 
 EXTRA = 0.04
 """m: how far below the inner garment's junction the outer one's comes down (room for both cloths; 2

@@ -27,9 +27,10 @@ from dataclasses import dataclass, field
 import numpy as np
 from numba import njit
 
-from service.geometry.closest import ClosestPoint, KeptQueries
+from service.geometry.closest import ClosestPoint
 from service.geometry.fold_side import FoldSides
 from service.geometry.intersections import TriangleGrid
+from service.geometry.kept_queries import KeptQueries
 from service.geometry.mesh import vertex_normals
 from service.pipeline.fit import dilate, vertex_neighbours
 from service.pipeline.quality import PENETRATION_BAND
@@ -56,7 +57,7 @@ class Inner:
     kept: KeptQueries | None = None
     """Closest points on ``mesh`` already asked for (of these V vertices), or None: none yet."""
     reversed_faces: np.ndarray | None = None
-    """(F,) bool: faces of ``mesh`` that may face the body (``service.pipeline.squeeze.BodyAnchors.
+    """(F,) bool: faces of ``mesh`` that may face the body (``service.pipeline.collisions.squeeze.BodyAnchors.
     reversed_faces``: a fold's middle sheet, and at an armpit faces that lie the usual way); None: none."""
     sides: FoldSides | None = None
     """Its side test (``service.geometry.fold_side``) for the vertices closest to ``reversed_faces``, the
@@ -96,7 +97,7 @@ class RepairResult:
     faults: list[np.ndarray] = field(default_factory=list)
     """Per inner layer, ``(K,)`` indices of its own vertices where the faults left are: the corners of its
     triangles still crossing this layer, and the closest-face corners of this layer's vertices inside it
-    (``service.pipeline.world_untangle`` presses the inner garment deeper there in its next pass)."""
+    (``service.pipeline.collisions.passes`` presses the inner garment deeper there in its next pass)."""
 
 
 def _pushes(x: np.ndarray, inner: Inner, margin: np.ndarray, band: float, forced: np.ndarray, queries=None):

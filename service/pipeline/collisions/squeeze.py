@@ -1,6 +1,6 @@
 """Squeeze inner garments under the outer ones that cover them, in world space, before the repair.
 
-The repair (``service.pipeline.repair``) only ever moves a layer outwards, over its final inner layers. Where
+The repair (``collisions.repair``) only ever moves a layer outwards, over its final inner layers. Where
 an inner garment hangs loose beyond the one that covers it (a T-shirt tucked into tight pants: its
 hem 2-4 cm off the body, the waistband on the skin) that means lifting the pants over the T-shirt's
 hem: a ledge, and crossings left at the hem's rim that 24 rounds did not remove. Cloth does the
@@ -38,12 +38,13 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numba import njit
 
-from service.geometry.closest import ClosestPoint, KeptQueries
+from service.geometry.closest import ClosestPoint
 from service.geometry.intersections import TriangleGrid, segment_crossings
+from service.geometry.kept_queries import KeptQueries
 from service.geometry.mesh import face_normals
+from service.pipeline.collisions.repair import diffuse
 from service.pipeline.fit import dilate, vertex_neighbours
 from service.pipeline.quality import PENETRATION_BAND
-from service.pipeline.repair import diffuse
 
 
 @dataclass
@@ -62,7 +63,7 @@ class Outer:
     crossing pairs in four tops on a short, heavy body."""
     kept: KeptQueries | None = None
     """Closest points on ``mesh`` already asked for (of the inner garment's V vertices), or None: none
-    yet (``service.pipeline.world_untangle`` asks ahead)."""
+    yet (``service.pipeline.collisions.passes`` asks ahead)."""
 
 
 def asks_segment_test(inner, outer, holds_legs_apart) -> bool:
@@ -176,7 +177,7 @@ class SqueezeSettings:
     """A vertex whose closest point on the outer layer is on its rim is past its opening, not under it
     (the repair's rule), unless the segment test finds it under: the fields, read where the fit left
     the vertex, can still call it covered (a jacket's cloth 5 cm past a T-shirt's armhole was pulled
-    10 cm). Off by default: it is the second way ``service.pipeline.world_untangle`` tries."""
+    10 cm). Off by default: it is the second way ``service.pipeline.collisions.passes`` tries."""
     relax: int = 4
     """Jacobi iterations over the whole moved patch, pulled vertices included, after the diffusion:
     neighbours pulled towards different sides of an armpit (torso and arm) otherwise part ways and

@@ -224,7 +224,7 @@ class LayeringRule:
 
     def holds_legs_apart(self, garment) -> bool:
         """Whether ``garment`` goes around each leg separately somewhere (pants, shorts; not a skirt):
-        a top tucked into it can hang below its crotch (``service.pipeline.squeeze.asks_segment_test``)."""
+        a top tucked into it can hang below its crotch (``collisions.squeeze.asks_segment_test``)."""
         body = self.body
         return any(
             len(loop.parts) == 1 and body.names[k][next(iter(loop.parts))] == "leg"

@@ -1,7 +1,7 @@
 """World-space untangling of the fitted outfit: the squeeze, then the exact repair, inner to outer.
 
-``untangle_world`` runs ``service.pipeline.squeeze`` (inner garments pressed under the outer ones that cover
-them) and ``service.pipeline.repair`` (every layer lifted clear of its final inner layers, exact crossing
+``untangle_world`` runs ``collisions.squeeze`` (inner garments pressed under the outer ones that cover
+them) and ``collisions.repair`` (every layer lifted clear of its final inner layers, exact crossing
 tests) on the world meshes the fit and the body map produced, and repeats both where faults remain. Which
 vertices can be near a layer, and where it covers them, comes from the fields at the fitted canonical vertices
 (``_field_at``). ``models`` is a ``service.pipeline.outfit.OutfitModels``.
@@ -14,11 +14,12 @@ from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
 
-from service.geometry.closest import Closest, ClosestPoint, KeptQueries, ask_ahead
+from service.geometry.closest import Closest, ClosestPoint
 from service.geometry.fold_side import FoldSides
+from service.geometry.kept_queries import KeptQueries, ask_ahead
+from service.pipeline.collisions.repair import REACH, Inner, RepairSettings, repair_layer
+from service.pipeline.collisions.squeeze import Outer, SqueezeSettings, asks_segment_test, squeeze_layer
 from service.pipeline.fit import dilate, vertex_neighbours
-from service.pipeline.repair import REACH, Inner, RepairSettings, repair_layer
-from service.pipeline.squeeze import Outer, SqueezeSettings, asks_segment_test, squeeze_layer
 
 DEFAULT_SQUEEZE = SqueezeSettings()
 ASK_AHEAD = True
@@ -85,7 +86,7 @@ def untangle_world(models, layer_ids, beta, body, explicit, fitted, world, faces
     Returns the meshes with the fewest crossings, then vertices inside, and their ``RepairResult``s.
     ``fitted`` is (fitted canonical vertices, the fits' field values or None) per garment
     (``_field_at``). ``lowered``: per garment, how far (m) its explicit mesh was let down from the one
-    its fields were learned on (``service.pipeline.junctions``), which widens where the garments over
+    its fields were learned on (``collisions.junctions``), which widens where the garments over
     it look for it."""
     lowered = lowered or [0.0] * len(world)
     best = None
@@ -153,7 +154,7 @@ def _deepen(results, faces, deep: list[np.ndarray], pressed: dict) -> None:
 def _squeeze(models, layer_ids, beta, fitted, world, faces, body: ClosestPoint, deep: list[np.ndarray],
              pressed: dict, squeeze: SqueezeSettings = DEFAULT_SQUEEZE) -> list[np.ndarray]:  # fmt: skip
     """World meshes with every garment pulled inside the outer ones that cover it
-    (``service.pipeline.squeeze``), from the outermost inwards. Where an outer garment covers a vertex and how
+    (``collisions.squeeze``), from the outermost inwards. Where an outer garment covers a vertex and how
     far it is comes from the outer garment's fields at the vertex's fitted canonical position, as in
     ``_repair``, and from ``_deepen``'s ``pressed``; how far inside it goes, from its ``deep``.
 
