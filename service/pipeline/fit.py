@@ -29,7 +29,6 @@ opening, so a hem under a jacket was only half untangled). No network runs for t
 
 from __future__ import annotations
 
-import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -38,7 +37,7 @@ from typing import Literal, Protocol
 import numpy as np
 
 from service.geometry.mesh import vertex_normals
-from service.geometry.mesh_topology import faces_key
+from service.geometry.rings import dilate, vertex_neighbours
 from service.pipeline.fields import FieldValues
 from service.pipeline.lbfgs import minimize_lbfgs
 from service.pipeline.lbfgs_kernel import minimize_fit
@@ -149,45 +148,6 @@ class FitResult:
     layers not made inactive; the garment's own column from ``OwnField`` when the settings say so;
     the bound and ``INACTIVE`` where ``bounds`` put a layer ``FAR_FIELD`` away), for the later
     stages to reuse; None when ``ok`` is False."""
-
-
-def vertex_neighbours(faces: np.ndarray, n_vertices: int):
-    """Sparse vertex adjacency ``(V, V)`` of ``faces (F, 3)`` (shared: do not modify it).
-
-    A garment's faces never change, and one request asks for its adjacency in the fit, the squeeze
-    and every repair pass: it is built once per distinct face array (by content) and kept."""
-    faces = np.ascontiguousarray(faces, dtype=np.int64)
-    key = (n_vertices, faces.shape, faces_key(faces))
-    with _ADJACENCY_LOCK:
-        found = _ADJACENCY.get(key)
-    if found is None:
-        found = vertex_neighbours_reference(faces, n_vertices)
-        with _ADJACENCY_LOCK:
-            while len(_ADJACENCY) >= ADJACENCY_CACHE:
-                _ADJACENCY.pop(next(iter(_ADJACENCY)))  # the oldest
-            _ADJACENCY[key] = found
-    return found
-
-
-ADJACENCY_CACHE = 32  # face arrays kept: the catalog's garments and a few more
-_ADJACENCY: dict = {}
-_ADJACENCY_LOCK = threading.Lock()
-
-
-def vertex_neighbours_reference(faces: np.ndarray, n_vertices: int):
-    """``vertex_neighbours`` built afresh."""
-    from scipy.sparse import coo_matrix
-
-    e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
-    e = np.concatenate([e, e[:, ::-1]])
-    return coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n_vertices, n_vertices)).tocsr()
-
-
-def dilate(mask: np.ndarray, adjacency, rings: int) -> np.ndarray:
-    out = mask.copy()
-    for _ in range(rings):
-        out = out | (adjacency @ out.astype(np.float64) > 0)
-    return out
 
 
 def fit_garment(

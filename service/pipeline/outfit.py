@@ -20,6 +20,7 @@ from typing import Literal
 
 import numpy as np
 
+from service.geometry.anchors import BodyAnchors
 from service.geometry.closest import ClosestPoint, signed_distance
 from service.geometry.sdf_grid import SdfGrid
 from service.pipeline.body import DEFAULT_BETA, BodyModel
@@ -29,7 +30,7 @@ from service.pipeline.collisions import junctions
 from service.pipeline.collisions.layering import GarmentProfile, LayeringRule, Refusal
 from service.pipeline.collisions.passes import repair_faults, untangle_world
 from service.pipeline.collisions.repair import RepairSettings
-from service.pipeline.collisions.squeeze import BodyAnchors
+from service.pipeline.collisions.traits import traits_of, tucked
 from service.pipeline.explicit import ExplicitModel, ExplicitOnnx
 from service.pipeline.fields import BODY, FieldSet, FieldValues
 from service.pipeline.fit import FitResult, FitSettings, fit_garment
@@ -118,8 +119,9 @@ class OutfitModels:
                 (inner_drape, inner), (drape, outer) = (self._drape_profile(g) for g in key)
                 body = self.layering_rule().body
                 a, b = self.catalog[inner_id], self.catalog[outer_id]
-                tucked = a.category == "top" and b.category == "bottom"
-                up = junctions.raising(inner, outer, body, inner_drape, a.faces, drape) if tucked else None
+                rule = self.layering_rule()
+                tucked_in = tucked(traits_of(rule, a), traits_of(rule, b))  # a top in a bottom
+                up = junctions.raising(inner, outer, body, inner_drape, a.faces, drape) if tucked_in else None
                 down = None if up is not None else junctions.lowering(inner, outer, body, drape)
                 self._junctions[key] = (up, down)
             return self._junctions[key]

@@ -336,19 +336,6 @@ def test_the_own_field_from_the_mesh_is_the_distance_to_the_tangent_plane_and_ne
     assert all(k != 2 for k, _ in asked) and (1, True) in asked
 
 
-def test_kept_adjacency_equals_a_fresh_one():
-    from service.pipeline.fit import vertex_neighbours, vertex_neighbours_reference
-
-    _, f = grid_mesh(6)
-    n = int(f.max()) + 1
-    first, again = vertex_neighbours(f, n), vertex_neighbours(f.copy(), n)
-    assert again is first  # same faces by content: the kept matrix
-    assert (first != vertex_neighbours_reference(f, n)).nnz == 0
-    other = f[:, ::-1].copy()  # other faces (orientation flipped): its own entry, same edges
-    assert vertex_neighbours(other, n) is not first
-    assert vertex_neighbours(f, n + 1).shape == (n + 1, n + 1)
-
-
 def test_rows_of_slices_the_full_jacobian():
     rng = np.random.default_rng(4)
     f, h = rng.normal(scale=0.01, size=(50, 3)), -np.ones((50, 3))

@@ -7,13 +7,14 @@ from __future__ import annotations
 import numpy as np
 import trimesh
 
+from service.geometry.anchors import BodyAnchors
 from service.geometry.closest import ClosestPoint
 from service.geometry.fold_side import FoldSides
 from service.geometry.intersections import intersecting_pairs, segment_crossings_reference
 from service.geometry.kept_queries import KeptQueries
 from service.pipeline.collisions.passes import DEEPEN, DEEPEN_RING, _deepen
 from service.pipeline.collisions.repair import Inner, RepairResult, RepairSettings, repair_layer
-from service.pipeline.collisions.squeeze import BodyAnchors, Outer, SqueezeSettings, squeeze_layer
+from service.pipeline.collisions.squeeze import Outer, SqueezeSettings, squeeze_layer
 from service.pipeline.quality import Layer, penetration
 from tests.meshes import grid_mesh
 

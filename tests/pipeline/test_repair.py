@@ -11,20 +11,13 @@ from service.geometry.kept_queries import KeptQueries
 from service.pipeline.collisions.repair import (
     Inner,
     RepairSettings,
-    _clear_of,
-    _clear_of_reference,
     _faces_around,
     lifts,
     repair_layer,
 )
-from tests.meshes import grid_mesh
+from tests.meshes import sheet
 
-
-def _sheet(n: int, size: float, z):
-    v, f = grid_mesh(n)
-    v = (v - [0.5, 0.5, 0]) * [size, size, 0]
-    v[:, 2] = z(v)
-    return v, f
+_sheet = sheet
 
 
 def _everywhere(n: int) -> np.ndarray:
@@ -182,27 +175,6 @@ def test_kept_queries_answer_as_fresh_ones_after_some_vertices_move():
     np.testing.assert_array_equal(normal, fresh.normal)
 
 
-def test_diffusion_on_the_free_rows_is_the_whole_product_bit_for_bit():
-    from service.pipeline.collisions.repair import diffuse, diffuse_reference
-    from service.pipeline.fit import dilate, vertex_neighbours
-
-    v, f = _sheet(15, 0.3, lambda v: 0.0 * v[:, 0])
-    adjacency = vertex_neighbours(f, len(v))
-    rng = np.random.default_rng(0)
-    held = rng.random(len(v)) < 0.05
-    u = np.where(held[:, None], rng.normal(size=v.shape), 0.0)
-    region = dilate(held, adjacency, 2)
-    # The whole-matrix diffusion the row-restricted one replaces.
-    degree = np.asarray(adjacency.sum(axis=1)).ravel()
-    expected = u
-    for _ in range(8):
-        mean = (adjacency @ expected) / np.maximum(degree, 1)[:, None]
-        expected = np.where((region & ~held)[:, None], mean, expected)
-    np.testing.assert_array_equal(diffuse(u, held, region, adjacency, 8), expected)
-    np.testing.assert_array_equal(diffuse_reference(u, held, region, adjacency, 8), expected)
-    assert np.abs(expected - u).max() > 0.01  # it spread
-
-
 def test_a_query_subset_holding_every_violation_repairs_as_all_near_vertices_do():
     inner_v, inner_f = _sheet(20, 0.4, lambda v: 0.0 * v[:, 0])
     outer_v, outer_f = _sheet(
@@ -240,9 +212,9 @@ def test_pruning_triangles_clear_of_the_inner_layer_changes_nothing(monkeypatch)
     n = len(outer_v)
     layer = [Inner(ClosestPoint.build(inner_v, inner_f), False, _everywhere(n), _everywhere(n))]
     pruned = repair_layer(outer_v, outer_f, layer)
-    cleared = repair._clear_of(outer_v, outer_f, _asked(layer[0], outer_v))
+    cleared = repair.clear_of(outer_v, outer_f, _asked(layer[0], outer_v))
     assert 0 < cleared.sum() < len(outer_f)  # the case prunes some triangles and keeps others
-    monkeypatch.setattr(repair, "_clear_of", lambda x, faces, kept: np.zeros(len(faces), dtype=bool))
+    monkeypatch.setattr(repair, "clear_of", lambda x, faces, kept: np.zeros(len(faces), dtype=bool))
     full = repair_layer(outer_v, outer_f, layer)
     assert pruned.crossing_pairs == full.crossing_pairs and pruned.rounds == full.rounds
     np.testing.assert_array_equal(pruned.vertices, full.vertices)
@@ -252,48 +224,6 @@ def _asked(layer: Inner, x: np.ndarray) -> KeptQueries:
     kept = KeptQueries(layer.mesh, len(x))
     kept.at(x, np.arange(len(x)))
     return kept
-
-
-def test_clear_of_is_the_reference_bit_for_bit():
-    inner_v, inner_f = _sheet(12, 0.4, lambda v: 0.0 * v[:, 0])
-    outer_v, outer_f = _sheet(16, 0.36, lambda v: 0.004 + 0.3 * (v[:, 0] + 0.18))
-    kept = KeptQueries(ClosestPoint.build(inner_v, inner_f), len(outer_v))
-    rng = np.random.default_rng(6)
-    kept.at(outer_v, np.flatnonzero(rng.random(len(outer_v)) < 0.6))  # some never asked
-    x = outer_v + rng.normal(size=outer_v.shape) * 0.002
-    some = outer_f[rng.random(len(outer_f)) < 0.5]
-    got = _clear_of(x, some, kept)
-    np.testing.assert_array_equal(got, _clear_of_reference(x, some, kept))
-    assert got.any() and not got.all()
-
-
-def test_no_triangle_proved_clear_touches_the_inner_layer():
-    # Loose triangles 0.5-3 cm across, from 1 cm inside a wavy sheet to 2 cm over it, some thin and
-    # obtuse: every one the proof calls clear is farther from the sheet than 0 at every sample point,
-    # and the three-ball rule proves some that one corner's ball does not.
-    from service.geometry.closest import closest_point_reference
-
-    inner_v, inner_f = _sheet(30, 0.4, lambda v: 0.01 * np.sin(25 * v[:, 0]))
-    rng = np.random.default_rng(11)
-    n = 3000
-    centre = np.column_stack([rng.uniform(-0.12, 0.12, (n, 2)), rng.uniform(-0.01, 0.02, n)])
-    size = rng.uniform(0.005, 0.03, n)[:, None, None]
-    corners = centre[:, None] + size * rng.normal(size=(n, 3, 3)) * [1, 1, 0.3]
-    x, faces = corners.reshape(-1, 3), np.arange(3 * n).reshape(n, 3)
-    kept = KeptQueries(ClosestPoint.build(inner_v, inner_f), len(x))
-    kept.at(x, np.arange(len(x)))
-    clear = _clear_of(x, faces, kept)
-    np.testing.assert_array_equal(clear, _clear_of_reference(x, faces, kept))
-    w = rng.dirichlet([1, 1, 1], 64)  # samples of each proved triangle, corners included
-    w = np.concatenate([np.eye(3), [[0.5, 0.5, 0], [0, 0.5, 0.5], [0.5, 0, 0.5]], w])
-    samples = np.einsum("sk,tkd->tsd", w, corners[clear]).reshape(-1, 3)
-    assert closest_point_reference(samples, inner_v, inner_f).distance.min() > 0
-    assert len(intersecting_pairs(x, faces[clear], inner_v, inner_f)) == 0
-    crossing = np.unique(intersecting_pairs(x, faces, inner_v, inner_f)[:, 0])
-    assert len(crossing) > 100 and not clear[crossing].any()
-    farthest = np.linalg.norm(corners[:, :, None] - corners[:, None], axis=3).max(axis=2)  # (n, 3)
-    one_corner = (np.abs(kept.signed[faces]) > farthest).any(axis=1)
-    assert (clear & ~one_corner).sum() > 100
 
 
 def test_faces_around_are_those_with_a_vertex_in_the_grown_box():

@@ -8,7 +8,8 @@ top; shorts under pants), the inner cloth between the parts lies outside the out
 height, and no push towards the body or along a normal takes it in: the outer garment has to come
 down around it. ``lowering`` moves the outer garment's cloth at its junction down, below the inner
 one's, in canonical space, as a smooth bump: full at the outer junction's saddle point, fading over
-``RADIUS`` times the drop, and fading out over ``GATE`` above the saddle (the shoulders and the
+``CollisionSettings.bump_radius`` times the drop, and fading out over ``gate`` above the saddle (the
+shoulders and the
 waistband stay where they are). How far is read on the body the garments are worn on (``body_run``:
 their explicit meshes there, which hang lower or higher on it than on the mean body). The stretch that
 adds is the outer garment's, as cloth pulled over a bulkier one stretches; ``benchmarks.orders``
@@ -33,30 +34,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from service.pipeline.collisions.layering import STEP, BodySlices, GarmentProfile, junction_run, slice_loops
-
-EXTRA = 0.04
-"""m: how far below the inner garment's junction the outer one's comes down (room for both cloths; 2
-cm left the jacket under the T-shirt crossing on one of ``benchmarks.orders --pairs``' three bodies)."""
-ROOMS = (EXTRA, 0.06, 0.10)
-"""m: the rooms an outfit with a garment let down is made with, in turn, while the one before left it
-crossing (``service.pipeline.outfit.make_outfit``). Which room leaves a stack with the jacket under a
-tighter top clean is a matter of millimetres upstream: ``benchmarks.orders --stacks 100`` with 4 cm,
-then with 6 cm, left different stacks crossing (seed 7: 7 and 3 of 85, 2 in both; seed 8: 3 and 4 of
-84, none in both; ``--let-down``: 3 and 2 of 60, 1 in both); of the three left after both, 10 cm
-made two clean (8 cm one). More room is a lower armhole on the outer top, so it is tried last."""
-RADIUS = 1.5
-"""The bump's radius per metre of drop (at least ``MIN_RADIUS``): the cloth around the saddle comes
-down with it, so the drop spreads over the sleeve and the side instead of pulling one vertex."""
-MIN_RADIUS = 0.06  # m
-GAP_PAD = 0.02
-"""m beyond a tucked top's loop around both legs to which it is gathered up in full, and then over which
-the gathering fades (``raising``): the loop's cloth moves up as one, its sleeves stay."""
-CROTCH_VERTICES = 8  # of the outer garment nearest its crotch's saddle: the highest is the crotch
-GATE = 0.10
-"""m above the saddle over which the drop fades to nothing: the top of the sleeve and the shoulder
-seam, on the body, stay (moved down they would go into the shoulder). 5 cm left the jacket under the
-tank top at 24-133 crossing pairs, 10 cm at 0-36."""
+from service.pipeline.collisions.layering import BodySlices, GarmentProfile, junction_run, slice_loops
+from service.pipeline.collisions.settings import SETTINGS
 
 
 def saddles(parts: frozenset[int], centres: np.ndarray, names: list[str]) -> list[np.ndarray]:
@@ -70,42 +49,37 @@ def saddles(parts: frozenset[int], centres: np.ndarray, names: list[str]) -> lis
 
 
 def lowering(inner: GarmentProfile, outer: GarmentProfile, body: BodySlices, outer_vertices: np.ndarray,
-             between: int = 0, length: int | None = None, extra: float = EXTRA):  # fmt: skip
+             between: int = 0, length: int | None = None, extra: float = SETTINGS.extra):  # fmt: skip
     """``(V, 3)`` displacement of the outer garment's canonical ``outer_vertices (V, 3)`` (its drape on
-    the mean body, of which ``outer`` is the profile) that brings its junctions ``EXTRA`` below the
+    the mean body, of which ``outer`` is the profile) that brings its junctions ``extra`` below the
     inner garment's (``inner``'s profile), or None where the inner one's hangs no lower. ``between``:
     garments between the two that were let down around the inner one too; each of their junctions
-    takes its own ``EXTRA`` below it, and this one comes down below all of them. ``length``: the run
+    takes its own ``extra`` below it, and this one comes down below all of them. ``length``: the run
     (levels) on the body the garments are worn on (``body_run``) instead of the drapes' own; the bump
-    stays where the drapes put it. ``extra``: the room in place of ``EXTRA`` (``ROOMS``)."""
+    stays where the drapes put it. ``extra``: the room in place of ``extra`` (``rooms``)."""
     run = junction_run(inner, outer, body)
     if run is None:
         return None
     drapes_length, k, parts = run
-    drop = (drapes_length if length is None else length) * STEP + extra * (1 + between)
-    z_saddle = body.levels[k] + STEP  # the first level where the outer garment joins the parts
-    radius = max(RADIUS * drop, MIN_RADIUS)
+    drop = (drapes_length if length is None else length) * SETTINGS.slice_step + extra * (1 + between)
+    z_saddle = body.levels[k] + SETTINGS.slice_step  # the first level where the outer garment joins the parts
+    radius = max(SETTINGS.bump_radius * drop, SETTINGS.min_bump_radius)
     out = np.zeros_like(outer_vertices)
     for xy in saddles(parts, body.centres[k], body.names[k]):
         target = np.array([xy[0], xy[1], z_saddle])
         saddle = outer_vertices[np.argmin(np.linalg.norm(outer_vertices - target, axis=1))]
         r = np.linalg.norm(outer_vertices - saddle, axis=1)
         w = np.clip(1 - (r / radius) ** 2, 0.0, None) ** 2
-        w *= np.clip((saddle[2] + GATE - outer_vertices[:, 2]) / GATE, 0.0, 1.0)
+        w *= np.clip((saddle[2] + SETTINGS.gate - outer_vertices[:, 2]) / SETTINGS.gate, 0.0, 1.0)
         out[:, 2] = np.minimum(out[:, 2], -drop * w)  # two saddles' bumps overlap: the deeper one
     return out
-
-
-BAND = 0.10
-"""m above and below the drapes' run within which ``body_run`` looks for a body's: the run on the
-catalog's bodies is within 5 cm of the mean body's (jacket under tank top: 16-21 cm against 18)."""
 
 
 def body_run(inner: GarmentProfile, outer: GarmentProfile, body: BodySlices, inner_vertices: np.ndarray,
              inner_faces: np.ndarray, outer_vertices: np.ndarray,
              outer_faces: np.ndarray) -> int:  # fmt: skip
     """The length (levels) of the junction run of the two garments on one body: their explicit meshes
-    there (canonical ``inner_vertices (V, 3)``, ``outer_vertices (W, 3)``), sliced only within ``BAND``
+    there (canonical ``inner_vertices (V, 3)``, ``outer_vertices (W, 3)``), sliced only within ``run_band``
     of the run of their drapes on the mean body (``inner``, ``outer``: those drapes' profiles), which
     must have one; 0 where the body's has none.
 
@@ -114,7 +88,7 @@ def body_run(inner: GarmentProfile, outer: GarmentProfile, body: BodySlices, inn
     box and held-out bodies, 18 on the mean body. A drop made for 18 left 1-2 cm of room on the bodies
     at 20-21, and those were the ones that crossed (4 of 10: 42-80 pairs, the others clean)."""
     length, k, _ = junction_run(inner, outer, body)
-    pad = round(BAND / STEP)
+    pad = round(SETTINGS.run_band / SETTINGS.slice_step)
     levels = range(max(k - length - pad, 0), min(k + pad + 1, len(body.levels)))
     meshes = ((inner, inner_vertices, inner_faces), (outer, outer_vertices, outer_faces))
     here = [GarmentProfile.build(p.garment_id, v, f, body, levels) for p, v, f in meshes]
@@ -136,13 +110,13 @@ class Gathering:
         ``outer_vertices`` on the same body, or None where it hangs no lower. Read per body: against the
         shorts' crotch, the jacket's hem hangs 2 cm lower on the mean body's drapes, 5.5 cm on a
         held-out body and 10.5 cm on the shortest man (their explicit meshes, canonical)."""
-        target = float(outer_vertices[self.crotch, 2].max()) + EXTRA
+        target = float(outer_vertices[self.crotch, 2].max()) + SETTINGS.extra
         z = inner_vertices[:, 2]
         hanging = (self.weight > 0) & (z < target)
         if not hanging.any():
             return None
         low = z[hanging].min()
-        top = target + max(GATE, target - low)  # gathered at most two to one
+        top = target + max(SETTINGS.gate, target - low)  # gathered at most two to one
         region = (self.weight > 0) & (z < top)
         gathered = top - (top - z) * (top - target) / (top - low)
         out = np.zeros_like(inner_vertices)
@@ -161,9 +135,9 @@ def raising(inner: GarmentProfile, outer: GarmentProfile, body: BodySlices, inne
     around it (``lowering``) showed: a crotch dropped 10 cm, and the jacket's hem still crossed it
     (195-294 pairs on ``benchmarks.orders --pairs``' bodies). The top's hem is under the pants, where
     nobody sees it, so the top gives way instead, as a tucked shirt's tail bunches up: across the
-    width of its loop around both legs (plus ``GAP_PAD``, fading out over another), every vertex below
-    ``GATE`` above the target height (or more, so that the cloth is gathered at most two to one) is
-    pressed up, its height mapped linearly so that the lowest one ends ``EXTRA`` above the outer
+    width of its loop around both legs (plus ``gather_pad``, fading out over another), every vertex below
+    ``gate`` above the target height (or more, so that the cloth is gathered at most two to one) is
+    pressed up, its height mapped linearly so that the lowest one ends ``extra`` above the outer
     garment's crotch and those at the top stay: cloth gathered, never folded over itself. Across the
     whole hem, not only between the legs: gathered there alone, the hem rose in a V from each thigh's
     front to the crotch, and its slopes at the thighs crossed the pants (41-49 pairs on two bodies)."""
@@ -183,11 +157,12 @@ def raising(inner: GarmentProfile, outer: GarmentProfile, body: BodySlices, inne
     around = [lp for lp in loops if lp.contains(mid[None])[0]]
     if not around:
         return None
-    full = max(float(np.abs((lp.points - mid) @ axis).max()) for lp in around) + GAP_PAD
-    w = np.clip((full + GAP_PAD - np.abs((inner_vertices[:, :2] - mid) @ axis)) / GAP_PAD, 0.0, 1.0)
+    full = max(float(np.abs((lp.points - mid) @ axis).max()) for lp in around) + SETTINGS.gather_pad
+    pad = SETTINGS.gather_pad
+    w = np.clip((full + pad - np.abs((inner_vertices[:, :2] - mid) @ axis)) / pad, 0.0, 1.0)
     # The outer garment's crotch: its vertices nearest the saddle, a level above the run's top.
-    saddle = np.array([*mid, body.levels[k] + STEP])
-    crotch = np.argsort(np.linalg.norm(outer_vertices - saddle, axis=1))[:CROTCH_VERTICES]
+    saddle = np.array([*mid, body.levels[k] + SETTINGS.slice_step])
+    crotch = np.argsort(np.linalg.norm(outer_vertices - saddle, axis=1))[:SETTINGS.crotch_vertices]
     return Gathering(w * w * (3 - 2 * w), crotch)
 
 

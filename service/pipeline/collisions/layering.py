@@ -1,6 +1,7 @@
 """Which garment orders cloth can take, decided from the garments before the pipeline runs (issue 21).
 
-Everything is read off horizontal slices (every ``STEP``, Z up) of the rest meshes on the mean body
+Everything is read off horizontal slices (every ``CollisionSettings.slice_step``, Z up) of the rest meshes on
+the mean body
 (catalog templates, bundled or imported: the same for every body shape, since each garment is
 graded to the body it is worn on). At each level the body's cross-section is a set of closed loops:
 the body *parts* there (torso, arms, legs). A garment's closed loop at that level *wraps* the parts
@@ -9,11 +10,11 @@ whose centres it encloses. Two rules:
 1. **Topology.** Where the inner garment wraps parts in one loop (a skirt around both legs) that the
    outer garment's loops hold apart (pants, one loop per leg), the outer garment would have to pass
    between the parts through the inner one's cloth. No cloth does that, so the order is refused when
-   this holds over more than ``JOIN_TOLERANCE`` of height (a crotch seam or an armhole that hangs a
+   this holds over more than ``join_tolerance`` of height (a crotch seam or an armhole that hangs a
    little lower than the other garment's is pushed up instead).
 2. **Girth.** Where the outer garment wraps the inner one, its perimeter stretched by
-   ``STRETCH_LIMIT`` must hold the inner one pressed onto the body: the convex hull of the body
-   parts it wraps, plus ``LAYER_GAP`` per layer between (a 2 mm clearance all round, as the repair
+   ``stretch_limit`` must hold the inner one pressed onto the body: the convex hull of the body
+   parts it wraps, plus ``margin`` per layer between (a 2 mm clearance all round, as the repair
    keeps). Garments draped on this body always pass; a skin-tight garment cut smaller than the body
    (compression wear) over another one does not.
 
@@ -30,15 +31,7 @@ import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-STEP = 0.01  # m between slices
-JOIN_TOLERANCE = {"leg": 0.05, "arm": 0.10, "torso": 0.10}
-"""m of height over which the parts an inner loop joins may be held apart by the outer garment, by the
-lowest-ranked part involved. Bottoms hang from a belted waistband, so an outer crotch cannot ride up
-over a skirt's cloth between the legs; a fitted top's armpit lifts a looser top's lower armhole
-(a jacket's sits 6-8 cm below a T-shirt's), as a sweater's lifts a shirt's."""
-STRETCH_LIMIT = 0.10  # strain a garment's girth can take (woven cotton, knits take more)
-LAYER_GAP = 0.002  # m: clearance per layer, the repair's margin
-MIN_PART = 0.03  # m: body loops shorter than this (finger tips) are no part of anything a garment wraps
+from service.pipeline.collisions.settings import SETTINGS
 
 
 @dataclass(frozen=True)
@@ -62,11 +55,12 @@ class BodySlices:
     @classmethod
     def build(cls, vertices: np.ndarray, faces: np.ndarray) -> BodySlices:
         lo, hi = vertices[:, 2].min(), vertices[:, 2].max()
-        levels = np.arange(lo + STEP / 2, hi, STEP)
+        levels = np.arange(lo + SETTINGS.slice_step / 2, hi, SETTINGS.slice_step)
         centres, hulls, names = [], [], []
         crotch = None
         for z in levels[::-1]:  # from the head down: the torso's loop ends at the crotch
-            loops = [lp for lp in slice_loops(vertices, faces, z) if lp.closed and lp.perimeter >= MIN_PART]
+            loops = slice_loops(vertices, faces, z)
+            loops = [lp for lp in loops if lp.closed and lp.perimeter >= SETTINGS.min_part]
             c = np.array([lp.centre for lp in loops]).reshape(-1, 2)
             centres.append(c)
             hulls.append([lp.points for lp in loops])
@@ -147,11 +141,11 @@ def topology_refusal(inner: GarmentProfile, outer: GarmentProfile, body: BodySli
         return None
     best, k, parts = found
     kinds = {body.names[k][i] for i in parts}
-    if best * STEP <= min(JOIN_TOLERANCE[kind] for kind in kinds):
+    if best * SETTINGS.slice_step <= min(SETTINGS.join_tolerance[kind] for kind in kinds):
         return None
     names = f"both {kinds.pop()}s" if len(kinds) == 1 else " and ".join(sorted(kinds))
     reason = (
-        f"{inner.garment_id} wraps {names} in one piece over {100 * best * STEP:.0f} cm where "
+        f"{inner.garment_id} wraps {names} in one piece over {100 * best * SETTINGS.slice_step:.0f} cm where "
         f"{outer.garment_id} goes around each separately: {outer.garment_id} cannot be worn over "
         f"{inner.garment_id} (the other order can)"
     )
@@ -172,14 +166,14 @@ def girth_refusal(
                 if not a.parts <= b.parts:
                     continue
                 need = hull_perimeter(np.concatenate([body.hulls[k][i] for i in a.parts]))
-                need += 2 * np.pi * LAYER_GAP * between
-                short = need - b.perimeter * (1 + STRETCH_LIMIT)
+                need += 2 * np.pi * SETTINGS.margin * between
+                short = need - b.perimeter * (1 + SETTINGS.stretch_limit)
                 if short > worst:
                     worst, at = short, (k, b.perimeter, need)
     if at is None:
         return None
     k, have, need = at
-    stretched = 100 * have * (1 + STRETCH_LIMIT)
+    stretched = 100 * have * (1 + SETTINGS.stretch_limit)
     reason = (
         f"{outer.garment_id} is {100 * have:.0f} cm around at {100 * body.levels[k]:.0f} cm and stretches "
         f"to {stretched:.0f} cm, but {inner.garment_id} under it needs {100 * need:.0f} cm"

@@ -17,9 +17,10 @@ import numpy as np
 from service.geometry.closest import Closest, ClosestPoint
 from service.geometry.fold_side import FoldSides
 from service.geometry.kept_queries import KeptQueries, ask_ahead
+from service.geometry.rings import dilate, vertex_neighbours
 from service.pipeline.collisions.repair import REACH, Inner, RepairSettings, repair_layer
 from service.pipeline.collisions.squeeze import Outer, SqueezeSettings, asks_segment_test, squeeze_layer
-from service.pipeline.fit import dilate, vertex_neighbours
+from service.pipeline.collisions.traits import traits_of
 
 DEFAULT_SQUEEZE = SqueezeSettings()
 ASK_AHEAD = True
@@ -199,7 +200,7 @@ def _squeeze(models, layer_ids, beta, fitted, world, faces, body: ClosestPoint, 
                 kept, future = asked.pop((j, i))
                 future.result()
             inner_g, outer_g = models.catalog[layer_ids[j + 1]], models.catalog[layer_ids[i + 1]]
-            looser = asks_segment_test(inner_g, outer_g, models.layering_rule().holds_legs_apart)
+            looser = asks_segment_test(inner_g, outer_g, lambda g: traits_of(models.layering_rule(), g))
             outer.append(Outer(mesh(i), *masks[(j, i)], looser_under=looser, kept=kept))
         if outer:
             floor = (j + 1) * DEFAULT_SQUEEZE.margin  # room for the garments under this one

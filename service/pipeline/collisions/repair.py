@@ -25,14 +25,15 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from numba import njit
 
+from service.geometry.clear_of import clear_of
 from service.geometry.closest import ClosestPoint
+from service.geometry.diffusion import diffuse
 from service.geometry.fold_side import FoldSides
 from service.geometry.intersections import TriangleGrid
 from service.geometry.kept_queries import KeptQueries
 from service.geometry.mesh import vertex_normals
-from service.pipeline.fit import dilate, vertex_neighbours
+from service.geometry.rings import dilate, vertex_neighbours
 from service.pipeline.quality import PENETRATION_BAND
 from service.process.threads import pool
 
@@ -127,83 +128,6 @@ def _pushes(x: np.ndarray, inner: Inner, margin: np.ndarray, band: float, forced
     return idx, point[bad] + margin[idx, None] * normal[bad], near[bad & inside]
 
 
-def _clear_of(x: np.ndarray, faces: np.ndarray, kept: KeptQueries) -> np.ndarray:
-    """``(F,) bool``: triangles ``faces (F, 3)`` of ``x (V, 3)`` that provably do not touch the mesh of
-    ``kept``. A corner v at distance d from it has no point of the mesh in the open ball of radius d
-    around it; the triangle is clear when those balls cover it:
-
-    - one corner's ball alone: d is more than its distance to the other two corners (the farthest
-      points of the triangle from it);
-    - all three: the smallest d is more than the farthest any point of the triangle can be from its
-      nearest corner, the circumradius (a triangle without an obtuse angle: its circumcentre), or half
-      the longest edge (with one: the farthest point is on that edge, between its end and its middle).
-      Pairs of cloth layers ~1 cm apart with 1-2 cm triangles: a third more triangles proved clear than
-      by the one-corner rule alone (body + 4, 54,000 -> 76,000 of 136,000 a request).
-
-    The distance of a corner comes from its last closest-point answer, less how far it moved since;
-    a corner never asked proves nothing. Only the rest get the exact crossing tests, the same pairs
-    as testing them all. ``_clear_of_reference`` bit for bit, one compiled loop over the triangles."""
-    out = np.empty(len(faces), dtype=np.bool_)
-    _clear_of_kernel(np.ascontiguousarray(x, dtype=np.float64), np.ascontiguousarray(faces, dtype=np.int64),
-                     kept.signed, kept.points, out)  # fmt: skip
-    return out
-
-
-COVER_SLACK = 1e-9
-"""Relative slack of the three-ball rule's radius: the circumradius is computed in floats."""
-
-
-@njit(cache=True, nogil=True)
-def _clear_of_kernel(x, faces, signed, points, out):
-    bound, edge = np.empty(3), np.empty(3)
-    for t in range(len(faces)):
-        for k in range(3):
-            v, w = faces[t, k], faces[t, (k + 2) % 3]  # the edge from the previous corner, as the roll
-            dx, dy, dz = x[v, 0] - points[v, 0], x[v, 1] - points[v, 1], x[v, 2] - points[v, 2]
-            moved = abs(signed[v]) - np.sqrt(dx * dx + dy * dy + dz * dz)
-            bound[k] = moved if moved == moved else -np.inf  # NaN: never asked
-            ex, ey, ez = x[v, 0] - x[w, 0], x[v, 1] - x[w, 1], x[v, 2] - x[w, 2]
-            edge[k] = np.sqrt(ex * ex + ey * ey + ez * ez)
-        clear = False
-        for k in range(3):  # corner k's edges: from the previous corner and to the next
-            clear |= bound[k] > max(edge[k], edge[(k + 1) % 3])
-        if not clear:
-            a, b, c = faces[t, 0], faces[t, 1], faces[t, 2]
-            ux, uy, uz = x[b, 0] - x[a, 0], x[b, 1] - x[a, 1], x[b, 2] - x[a, 2]
-            wx, wy, wz = x[c, 0] - x[a, 0], x[c, 1] - x[a, 1], x[c, 2] - x[a, 2]
-            nx, ny, nz = uy * wz - uz * wy, uz * wx - ux * wz, ux * wy - uy * wx
-            twice_area = np.sqrt(nx * nx + ny * ny + nz * nz)
-            longest = max(edge[0], max(edge[1], edge[2]))
-            squares = edge[0] * edge[0] + edge[1] * edge[1] + edge[2] * edge[2]
-            if longest * longest > squares - longest * longest or not twice_area > 0:  # obtuse
-                radius = 0.5 * longest
-            else:
-                radius = edge[0] * edge[1] * edge[2] / (2.0 * twice_area)
-            clear = min(bound[0], min(bound[1], bound[2])) > radius * (1 + COVER_SLACK) + 1e-12
-        out[t] = clear
-
-
-def _clear_of_reference(x: np.ndarray, faces: np.ndarray, kept: KeptQueries) -> np.ndarray:
-    """``_clear_of`` in numpy over all triangles at once."""
-    bound = np.abs(kept.signed) - np.linalg.norm(x - kept.points, axis=1)  # NaN where never asked
-    bound = np.where(np.isnan(bound), -np.inf, bound)[faces]  # (F, 3)
-    tri = x[faces]
-    d = tri - np.roll(tri, 1, axis=1)
-    edge = np.sqrt(d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1] + d[..., 2] * d[..., 2])  # from the previous
-    one = (bound > np.maximum(edge, np.roll(edge, -1, axis=1))).any(axis=1)
-    u, w = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
-    n = np.stack([u[:, 1] * w[:, 2] - u[:, 2] * w[:, 1], u[:, 2] * w[:, 0] - u[:, 0] * w[:, 2],
-                  u[:, 0] * w[:, 1] - u[:, 1] * w[:, 0]], axis=1)  # fmt: skip
-    twice_area = np.sqrt(n[:, 0] * n[:, 0] + n[:, 1] * n[:, 1] + n[:, 2] * n[:, 2])
-    longest = edge.max(axis=1)
-    squares = edge[:, 0] * edge[:, 0] + edge[:, 1] * edge[:, 1] + edge[:, 2] * edge[:, 2]
-    obtuse = (longest * longest > squares - longest * longest) | ~(twice_area > 0)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        circumradius = edge[:, 0] * edge[:, 1] * edge[:, 2] / (2.0 * twice_area)
-    radius = np.where(obtuse, 0.5 * longest, circumradius)
-    return one | (bound.min(axis=1) > radius * (1 + COVER_SLACK) + 1e-12)
-
-
 def _faces_around(mesh: ClosestPoint, points: np.ndarray, pad: float) -> np.ndarray:
     """Indices of ``mesh``'s faces with a vertex inside the bounding box of ``points (P, 3)`` (the
     corners of the triangles tested against it) grown by ``pad``."""
@@ -215,55 +139,6 @@ def _faces_around(mesh: ClosestPoint, points: np.ndarray, pad: float) -> np.ndar
     inside &= (v[:, 2] >= lo[2]) & (v[:, 2] <= hi[2])
     f = mesh.faces
     return np.flatnonzero(inside[f[:, 0]] | inside[f[:, 1]] | inside[f[:, 2]])
-
-
-def diffuse(u: np.ndarray, held: np.ndarray, region: np.ndarray, adjacency, iterations: int) -> np.ndarray:
-    """Spread displacements ``u (V, 3)`` from ``held`` into ``region`` (both (V,) bool): Jacobi iterations
-    of the weighted neighbour mean on the free rows. ``diffuse_reference`` bit for bit (each row's sum in
-    the CSR order, as scipy's product adds it), one compiled loop (``_diffuse_kernel``): the squeeze and the
-    repair call it every round, and scipy's row slicing was most of it."""
-    free = np.flatnonzero(region & ~held)
-    if not len(free):
-        return u
-    out = np.array(u, dtype=np.float64, order="C")
-    _diffuse_kernel(adjacency.indptr, adjacency.indices, adjacency.data, free, iterations, out)
-    return out
-
-
-@njit(cache=True, nogil=True)
-def _diffuse_kernel(indptr, indices, data, free, iterations, u):
-    degree = np.empty(len(free))
-    for k in range(len(free)):
-        total = 0.0
-        for j in range(indptr[free[k]], indptr[free[k] + 1]):
-            total += data[j]
-        degree[k] = max(total, 1.0)
-    new = np.empty((len(free), 3))
-    for _ in range(iterations):
-        for k in range(len(free)):
-            s0, s1, s2 = 0.0, 0.0, 0.0
-            for j in range(indptr[free[k]], indptr[free[k] + 1]):
-                c, w = indices[j], data[j]
-                s0 += w * u[c, 0]
-                s1 += w * u[c, 1]
-                s2 += w * u[c, 2]
-            new[k, 0], new[k, 1], new[k, 2] = s0 / degree[k], s1 / degree[k], s2 / degree[k]
-        for k in range(len(free)):
-            u[free[k], 0], u[free[k], 1], u[free[k], 2] = new[k, 0], new[k, 1], new[k, 2]
-
-
-def diffuse_reference(u: np.ndarray, held: np.ndarray, region: np.ndarray, adjacency, iterations: int):
-    """``diffuse`` with scipy: only the free rows change, and their rows of the adjacency give the same sums
-    as the whole product."""
-    free = np.flatnonzero(region & ~held)
-    if not len(free):
-        return u
-    rows = adjacency[free]
-    degree = np.maximum(np.asarray(rows.sum(axis=1)).ravel(), 1)[:, None]
-    u = u.copy()
-    for _ in range(iterations):
-        u[free] = (rows @ u) / degree
-    return u
 
 
 def repair_layer(
@@ -357,7 +232,7 @@ def repair_layer(
         for n, (t, grid) in enumerate(zip(tested, grids, strict=True)):
             changed = np.flatnonzero(moved[faces[t]].any(axis=1))
             # A moved triangle's old pairs go, whether it is tested again or proved clear now.
-            again = changed[~_clear_of(x, faces[t[changed]], queries[n])]
+            again = changed[~clear_of(x, faces[t[changed]], queries[n])]
             pairs = grid.crossing(x, faces[t[again]])
             pairs[:, 0] = again[pairs[:, 0]]
             hits[n] = np.concatenate([hits[n][~np.isin(hits[n][:, 0], changed)], pairs])

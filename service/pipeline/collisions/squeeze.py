@@ -36,14 +36,12 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 import numpy as np
-from numba import njit
 
 from service.geometry.closest import ClosestPoint
+from service.geometry.diffusion import diffuse
 from service.geometry.intersections import TriangleGrid, segment_crossings
 from service.geometry.kept_queries import KeptQueries
-from service.geometry.mesh import face_normals
-from service.pipeline.collisions.repair import diffuse
-from service.pipeline.fit import dilate, vertex_neighbours
+from service.geometry.rings import dilate, vertex_neighbours
 from service.pipeline.quality import PENETRATION_BAND
 
 
@@ -66,79 +64,23 @@ class Outer:
     yet (``service.pipeline.collisions.passes`` asks ahead)."""
 
 
-def asks_segment_test(inner, outer, holds_legs_apart) -> bool:
+def asks_segment_test(inner, outer, traits) -> bool:
     """Whether garment ``inner`` under ``outer`` (catalog ``Garment``s) gets the segment test: worn
-    against the catalog's usual order (its ``layer_rank`` not below the outer one's), and either of the
-    same category (a looser top under a tighter one, a bottom in another) or a top tucked into a bottom
-    that goes around each leg (``LayeringRule.holds_legs_apart``: pants, shorts), whose crotch the top's
-    hem can hang below on a short body, as a looser top's armhole does below a fitted one's armpit.
-    Not a top in a skirt: the test walked a jacket's hem inside a skirt on the shortest man into 12
-    crossing pairs where it had none. ``benchmarks.orders --pairs`` with tucked tops asked too: the long
-    sleeve in pants on the shortest, lightest man 105 -> 6 crossing pairs, in shorts 24 -> 0.
-    ``holds_legs_apart(garment) -> bool`` is asked only of a bottom a top is tucked into: usual orders
-    never read the garments' slices."""
+    against the catalog's usual order (its ``layer_rank`` not below the outer one's), and either worn
+    alike (``collisions.traits.worn_alike``: a looser top under a tighter one, a bottom in another) or
+    tucked into a garment that goes around each leg (``traits.tucked`` and ``holds_legs_apart``: a top
+    in pants, shorts), whose crotch the inner hem can hang below on a short body, as a looser top's
+    armhole does below a fitted one's armpit. Not a top in a skirt: the test walked a jacket's hem
+    inside a skirt on the shortest man into 12 crossing pairs where it had none. ``benchmarks.orders
+    --pairs`` with tucked tops asked too: the long sleeve in pants on the shortest, lightest man 105 -> 6
+    crossing pairs, in shorts 24 -> 0. ``traits(garment) -> GarmentTraits`` (``traits.traits_of``) is
+    asked only against the usual order: usual orders never read the garments' slices."""
+    from service.pipeline.collisions.traits import tucked, worn_alike
+
     if inner.layer_rank < outer.layer_rank:
         return False
-    if inner.category == outer.category:
-        return True
-    return inner.category == "top" and outer.category == "bottom" and holds_legs_apart(outer)
-
-
-@dataclass(frozen=True)
-class BodyAnchors:
-    """Where each garment vertex sits on the body: a face of the body mesh and barycentric weights,
-    from the garment's rest mesh on the mean body (every body shares its faces)."""
-
-    face: np.ndarray  # (V,) int64
-    bary: np.ndarray  # (V, 3)
-
-    @classmethod
-    def build(cls, rest: np.ndarray, mean_body: ClosestPoint) -> BodyAnchors:
-        """Anchors of rest vertices ``(V, 3)`` at their closest points on the mean body."""
-        q = mean_body.query(rest)
-        return cls(q.face, q.bary)
-
-    def on(self, body_vertices: np.ndarray, body_faces: np.ndarray) -> np.ndarray:
-        """The anchors on a body of the same topology: ``(V, 3)`` points."""
-        corners = body_vertices[body_faces[self.face]]  # (V, 3, 3)
-        return np.einsum("vk,vkx->vx", self.bary, corners)
-
-    def reversed_faces(self, vertices: np.ndarray, faces: np.ndarray, body_vertices: np.ndarray,
-                       body_faces: np.ndarray, body_normals: np.ndarray | None = None,
-                       ) -> np.ndarray:  # fmt: skip
-        """``(F,)`` bool: faces of the garment ``vertices (V, 3)``, ``faces (F, 3)`` on this body whose
-        normal points against the body's, summed over their corners' anchor faces: the middle sheet of a
-        Z-fold, seen from above, says "inside" where a vertex is over it. A layer pushed out along it
-        went into the body: a tank top over a jacket's chest fold, pushed back and forth between the
-        two for 24 rounds. ``body_normals``: the body's unit face normals if the caller has them
-        (``face_normals``). ``reversed_faces_reference`` bit for bit, the sums compiled
-        (``_reversed_kernel``)."""
-        if body_normals is None:
-            body_normals = face_normals(body_vertices, body_faces)
-        body_normal = np.ascontiguousarray(body_normals[self.face])  # (V, 3) at each anchor
-        faces = np.ascontiguousarray(faces, dtype=np.int64)
-        out = np.empty(len(faces), dtype=np.bool_)
-        _reversed_kernel(face_normals(vertices, faces, normalize=False), body_normal, faces, out)
-        return out
-
-    def reversed_faces_reference(self, vertices: np.ndarray, faces: np.ndarray, body_vertices: np.ndarray,
-                                 body_faces: np.ndarray) -> np.ndarray:  # fmt: skip
-        """``reversed_faces`` in numpy."""
-        body_normal = face_normals(body_vertices, body_faces)[self.face]  # (V, 3) at each anchor
-        normal = face_normals(vertices, faces, normalize=False)
-        return np.einsum("fx,fx->f", normal, body_normal[faces].sum(axis=1)) < 0
-
-
-@njit(cache=True, nogil=True)
-def _reversed_kernel(normal, body_normal, faces, out):
-    """Per face: its normal against the sum of its corners' anchor normals (summed corner by corner, as
-    numpy's sum over that axis; the dot product as einsum's, x and z first, then y) below 0."""
-    for t in range(len(faces)):
-        a, b, c = faces[t, 0], faces[t, 1], faces[t, 2]
-        s0 = body_normal[a, 0] + body_normal[b, 0] + body_normal[c, 0]
-        s1 = body_normal[a, 1] + body_normal[b, 1] + body_normal[c, 1]
-        s2 = body_normal[a, 2] + body_normal[b, 2] + body_normal[c, 2]
-        out[t] = (normal[t, 0] * s0 + normal[t, 2] * s2) + normal[t, 1] * s1 < 0
+    a, b = traits(inner), traits(outer)
+    return worn_alike(a, b) or (tucked(a, b) and b.holds_legs_apart)
 
 
 def beyond(x: np.ndarray, anchors: np.ndarray, outer: Outer, kept: KeptQueries) -> np.ndarray:
