@@ -121,14 +121,18 @@ def test_the_segment_test_finds_cloth_the_fields_put_far_from_the_outer_layer():
 
 
 def test_the_segment_test_is_asked_for_looser_tops_and_for_tops_tucked_into_legged_bottoms():
+    from service.pipeline.body import DEFAULT_BETA, BodyModel
     from service.pipeline.catalog import load_catalog
+    from service.pipeline.collisions.layering import LayeringRule
     from service.pipeline.collisions.squeeze import asks_segment_test
+    from service.pipeline.collisions.traits import traits_of
 
     catalog = dict(load_catalog())
-    legged = {"pants", "shorts"}  # what LayeringRule.holds_legs_apart says of the catalog (test_layering)
+    body = BodyModel.load()
+    rule = LayeringRule(body.vertices(np.asarray(DEFAULT_BETA)), body.faces)
     asked = {
         (a, b) for a in catalog for b in catalog
-        if a != b and asks_segment_test(catalog[a], catalog[b], lambda g: g.id in legged)
+        if a != b and asks_segment_test(catalog[a], catalog[b], lambda g: traits_of(rule, g))
     }  # fmt: skip
     assert {("jacket", "tshirt"), ("long_sleeve", "tank_top"), ("tshirt", "tank_top")} <= asked  # looser tops
     assert {("tshirt", "pants"), ("long_sleeve", "shorts"), ("jacket", "pants")} <= asked  # tucked in
