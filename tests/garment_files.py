@@ -1,11 +1,13 @@
 """Garment files made the way a shop's design tool would hand them over, by a method that is not
 ``training/garments`` (not an offset of the body): a skirt swept as a tube of rings, each an ellipse
 around the avatar's cross-section at that height plus an ease that grows from a snug waistband to a
-loose hem, never narrowing going down; its
-texture seam runs down the back, so the file's vertices are split there (OBJ by its ``vt``, GLB by
-duplicated vertices), written in the avatar's frame (Y up, feet on y = 0) in the unit asked for.
+loose hem, never narrowing going down; and a strapless dress (``dress_tube``) swept the same way from
+each cross-section's support function. Their texture seam runs down the back, so the file's vertices
+are split there (OBJ by its ``vt``, GLB by duplicated vertices), written in the avatar's frame (Y up,
+feet on y = 0) in the unit asked for.
 
-    python -m tests.garment_files OUT_DIR [--edge 0.012] [--units cm]   # skirt.obj/.mtl/.png, skirt.glb
+    python -m tests.garment_files OUT_DIR [--edge 0.012] [--units cm]
+    # skirt.obj/.mtl/.png, skirt.glb, dress.obj/.mtl/.png
 """
 
 from __future__ import annotations
@@ -48,6 +50,49 @@ def skirt_tube(body: BodyModel, edge: float = 0.012, ease: tuple[float, float] =
     idx = np.arange(len(vertices)).reshape(len(zs), n + 1)
     a, b, c, d = idx[:-1, :-1], idx[:-1, 1:], idx[1:, 1:], idx[1:, :-1]
     # Outward normals: going round with theta and down the rings.
+    faces_out = np.concatenate([np.stack([a, d, c], -1), np.stack([a, c, b], -1)]).reshape(-1, 3)
+    u = np.tile(theta / (2 * np.pi) * circumference / 0.05, len(zs))
+    v = np.repeat((zs - zs[0]) / 0.05, n + 1)
+    return vertices, faces_out, np.stack([u, v], 1)
+
+
+def dress_tube(body: BodyModel, edge: float = 0.012, ease: tuple[float, float] = (0.006, 0.07),
+               below_armpit: float = 0.07, below_knee: float = 0.06):  # fmt: skip
+    """(vertices (V, 3) Anny frame, faces (F, 3), uv (V, 2) v up) of a strapless shift dress: a tube
+    from ``below_armpit`` m under the armpits (the upper arm's second bone) to ``below_knee`` m under
+    the knees, ``edge`` m between neighbours, the seam column doubled at the back (angle pi).
+
+    Not the skirt's ellipses: each ring is the polar curve of the *support function* of the body's
+    cross-section there (arms left out) about the spine, r(theta) = max over the section's points of
+    their reach along theta, plus an ease growing from a snug bodice (which the drape's friction holds
+    up, as a strapless dress's boning does) to a loose hem; every angle's radius never shrinks going
+    down, so the dress falls straight from the bust over the waist and around both legs together."""
+    mean = body.vertices(np.asarray(DEFAULT_BETA))
+    bones = dict(zip(body.bone_names, body.bone_heads, strict=True))
+    top = bones["upperarm02.L"][2] - below_armpit
+    bottom = bones["lowerleg01.L"][2] - below_knee
+    limbs = [i for i, r in enumerate(body.region_names) if "arm" in r or "hand" in r]
+    arms = np.isin(body.regions, limbs)
+    faces = body.faces[~arms[body.faces].any(1)]
+    centre = np.array([0.0, bones["spine03"][1]])
+    zs = top - np.arange(0.0, top - bottom + 1e-9, edge)
+    probe = np.linspace(-np.pi, np.pi, 361)
+    directions = np.stack([np.sin(probe), -np.cos(probe)], 1)  # theta 0 at the front (-y)
+    reach = np.array([((cross_section(mean, faces, z) - centre) @ directions.T).max(0) for z in zs])
+    reach = np.maximum.accumulate(reach, axis=0)  # (Z, 361): never narrower below
+    reach += (ease[0] + (ease[1] - ease[0]) * np.linspace(0.0, 1.0, len(zs)))[:, None]
+    step = np.hypot(reach, np.gradient(reach, probe, axis=1))  # |d point / d theta|
+    circumference = float(np.trapezoid(step, probe, axis=1).max())
+    n = int(np.ceil(circumference / edge))
+    theta = np.linspace(-np.pi, np.pi, n + 1)  # the last column repeats the first: the seam
+    rings = []
+    for z, r in zip(zs, reach, strict=True):
+        radius = np.interp(theta, probe, r)
+        xy = centre + radius[:, None] * np.stack([np.sin(theta), -np.cos(theta)], 1)
+        rings.append(np.concatenate([xy, np.full((n + 1, 1), z)], 1))
+    vertices = np.concatenate(rings)
+    idx = np.arange(len(vertices)).reshape(len(zs), n + 1)
+    a, b, c, d = idx[:-1, :-1], idx[:-1, 1:], idx[1:, 1:], idx[1:, :-1]
     faces_out = np.concatenate([np.stack([a, d, c], -1), np.stack([a, c, b], -1)]).reshape(-1, 3)
     u = np.tile(theta / (2 * np.pi) * circumference / 0.05, len(zs))
     v = np.repeat((zs - zs[0]) / 0.05, n + 1)
@@ -113,6 +158,9 @@ def main(argv=None) -> None:
     v, f, uv = skirt_tube(body, args.edge)
     print(write_obj(args.out, "skirt", v, f, uv, args.units, floor))
     print(write_glb(args.out / "skirt.glb", v, f, uv, floor))
+    print(f"{len(v)} file vertices, {len(f)} faces")
+    v, f, uv = dress_tube(body, args.edge)
+    print(write_obj(args.out, "dress", v, f, uv, args.units, floor))
     print(f"{len(v)} file vertices, {len(f)} faces")
 
 

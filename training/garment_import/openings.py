@@ -2,9 +2,11 @@
 
 Anny's frame: +x is the body's left, z up. A loop around the neck is ``neck``; one out on an arm
 ``sleeve_l`` / ``sleeve_r``; for a bottom the highest loop is the ``waist`` and loops below the
-crotch off the midline ``leg_l`` / ``leg_r``; the lowest loop around the midline is the ``hem``;
-anything else, or a second loop for a name already taken, is ``opening_N``. The drape pins a bottom's
-``waist`` (``training.drape.dataset.PINNED_OPENINGS``), so a bottom must have one.
+crotch off the midline ``leg_l`` / ``leg_r``; for a dress without a ``neck`` (strapless) the highest
+loop around the midline, above its hem, is its ``top``; the lowest loop around the midline is the
+``hem``; anything else, or a second loop for a name already taken, is ``opening_N``. The drape pins a
+bottom's ``waist`` (``training.drape.dataset.PINNED_OPENINGS``), so a bottom must have one; a dress
+must have a ``neck`` or a ``top``, and a ``hem`` (``pipeline.prepare``).
 """
 
 from __future__ import annotations
@@ -36,6 +38,9 @@ def name_openings(vertices: np.ndarray, faces: np.ndarray, category: str, joints
     around = [i for i, c in enumerate(centres) if names[i] is None and abs(c[0]) < MIDLINE]
     if category == "bottom" and around:
         names[max(around, key=lambda i: centres[i][2])] = "waist"
+        around = [i for i in around if names[i] is None]
+    if category == "dress" and "neck" not in names and len(around) > 1:  # one more below: the hem
+        names[max(around, key=lambda i: centres[i][2])] = "top"
         around = [i for i in around if names[i] is None]
     if around:
         names[min(around, key=lambda i: centres[i][2])] = "hem"

@@ -75,6 +75,11 @@ def prepare(path: Path, spec: GarmentSpec, body: BodyModel) -> tuple[Garment, li
         raise GarmentFileError(path, f"no waist opening found (openings: {sorted(openings)})",
                                "A bottom hangs from its waistband: check that the top loop goes "
                                "around the waist of the avatar.")  # fmt: skip
+    if spec.category == "dress" and not ("hem" in openings and {"neck", "top"} & set(openings)):
+        raise GarmentFileError(path, f"no neckline and hem found (openings: {sorted(openings)})",
+                               "A dress hangs from the shoulders or the chest down around both legs: "
+                               "check that its top loop goes around the neck or the chest of the avatar "
+                               "and its hem around the legs.")  # fmt: skip
     garment = Garment(spec.id, spec.name, spec.category, spec.layer_rank, source.vertices, source.faces,
                       openings, source.display, source.material)  # fmt: skip
     return garment, notes
