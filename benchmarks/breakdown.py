@@ -20,7 +20,7 @@ For the outfits of ``benchmarks.latency`` (every body shape new, no quality meas
   reach at best, without doing less of it.
 
 Then, on 2 threads, how many cores the request keeps busy (process CPU time over wall time) up to the
-body map and in the world-space stages (the squeeze and the repair, ``untangle_world``): where the
+body map and in the world-space stages (the squeeze and the repair, ``resolve``): where the
 second core idles.
 
 The timers wrap ``onnxruntime.InferenceSession.run``, the KD-tree class that ``service.geometry.closest``
@@ -126,8 +126,8 @@ WORLD = {"wall": 0.0, "cpu": 0.0}  # the world-space stages (squeeze and repair)
 
 @contextmanager
 def _world_clock():
-    """Wall and process CPU time of ``untangle_world`` (the squeeze and the repair) into ``WORLD``."""
-    untangle = service.pipeline.outfit.untangle_world
+    """Wall and process CPU time of ``resolve`` (the squeeze and the repair) into ``WORLD``."""
+    untangle = service.pipeline.outfit.resolve
 
     def timed(*args, **kwargs):
         t0, c0 = time.perf_counter(), time.process_time()
@@ -137,18 +137,18 @@ def _world_clock():
             WORLD["wall"] += time.perf_counter() - t0
             WORLD["cpu"] += time.process_time() - c0
 
-    service.pipeline.outfit.untangle_world = timed
+    service.pipeline.outfit.resolve = timed
     try:
         yield
     finally:
-        service.pipeline.outfit.untangle_world = untangle
+        service.pipeline.outfit.resolve = untangle
 
 
 def measure(models: OutfitModels, ids: list[str], betas: np.ndarray, repair: bool = True) -> dict[str, float]:
     """p50 (ms) over ``betas`` of the total and of the time inside onnxruntime and the KD-tree; and the
     cores kept busy (process CPU time over wall time, summed over the requests) before the world-space
     stages and in them."""
-    rows, busy = [], np.zeros(4)  # (wall, cpu) before untangle_world, (wall, cpu) in it
+    rows, busy = [], np.zeros(4)  # (wall, cpu) before resolve, (wall, cpu) in it
     for beta in betas:
         SPENT.update(dict.fromkeys(SPENT, 0.0))
         WORLD.update(dict.fromkeys(WORLD, 0.0))

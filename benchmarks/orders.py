@@ -43,7 +43,7 @@ import itertools
 import numpy as np
 
 from benchmarks.imported import corners
-from service.pipeline.collisions.layering import STEP
+from service.pipeline.collisions.settings import SETTINGS
 from service.pipeline.outfit import OutfitModels, make_outfit
 from service.pipeline.strain import RestShape, green_strain_norms
 from training.drape.dataset import sample_betas
@@ -150,7 +150,7 @@ def let_down(models: OutfitModels, args) -> None:
     chosen = [
         list(ids)
         for ids in itertools.permutations(sorted(models.catalog), 2)
-        if not models.refusals(list(ids)) and models.lowering(*ids) is not None
+        if not models.refusals(list(ids)) and models.pairs.lowering(*ids) is not None
     ]
     runs = [(ids, beta, measured(models, ids, beta)) for ids in chosen for beta in betas]
     _table(f"Pairs let down at a junction on {args.bodies} held-out bodies + 4 corners", runs)
@@ -187,11 +187,11 @@ def junctions(models: OutfitModels) -> None:
     from service.pipeline.body import DEFAULT_BETA
     from service.pipeline.collisions.layering import GarmentProfile, junction_run
 
-    rule = models.layering_rule()
+    rule = models.pairs.layering_rule()
     beta = np.asarray(DEFAULT_BETA, dtype=np.float64)
     drape = {
-        g: GarmentProfile.build(g, models.clear_of_body(models.explicit[g].canonical(beta)), garment.faces,
-                                rule.body)
+        g: GarmentProfile.build(g, models.clearance.clear_of_body(models.explicit[g].canonical(beta)),
+                                garment.faces, rule.body)
         for g, garment in models.catalog.items()
     }  # fmt: skip
     print("## Junctions: how far the inner garment's armhole or crotch hangs below the outer one's (cm)")
@@ -204,7 +204,7 @@ def junctions(models: OutfitModels) -> None:
             continue
         k, parts = (rest or draped)[1:]
         kinds = " + ".join(sorted({rule.body.names[k][i] for i in parts}))
-        cm = [f"{100 * r[0] * STEP:.0f}" if r else "0" for r in (rest, draped)]
+        cm = [f"{100 * r[0] * SETTINGS.slice_step:.0f}" if r else "0" for r in (rest, draped)]
         refused = "yes" if models.refusals([a, b]) else "no"
         print(f"| {a} < {b} | {kinds} | {cm[0]} | {cm[1]} | {refused} |")
 

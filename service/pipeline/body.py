@@ -42,6 +42,7 @@ that height (``supported_weight_range_kg``); anything else raises ``ShapeOutOfRa
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -61,6 +62,8 @@ SUPPORTED_WEIGHT_PARAM = (0.0, 1.0)
 HEIGHT_TOLERANCE_M = 1e-6
 MASS_TOLERANCE_KG = 1e-5
 MAX_NEWTON_STEPS = 30
+# Decimals of the range bounds in refusal messages (0.1 cm, 0.1 kg: a tape measure and a scale's reading).
+RANGE_DECIMALS = 1
 
 
 class ShapeOutOfRange(ValueError):
@@ -347,6 +350,23 @@ class BodyModel:
 # ---------------------------------------------------------------- human units
 
 
+def printed_bounds(lo: float, hi: float) -> tuple[float, float]:
+    """``(lo, hi)`` rounded inwards to ``RANGE_DECIMALS``: the lower bound up, the upper one down, so a
+    check against ``(lo, hi)`` accepts both printed bounds and refuses a value one printed step beyond
+    either."""
+    scale = 10**RANGE_DECIMALS
+    up, down = math.ceil(lo * scale), math.floor(hi * scale)
+    up += up / scale < lo  # a float product a hair below the exact one
+    down -= down / scale > hi
+    return up / scale, down / scale
+
+
+def format_range(lo: float, hi: float) -> str:
+    """``"135.7-200.8"``: the printed bounds of ``(lo, hi)`` (``printed_bounds``)."""
+    p_lo, p_hi = printed_bounds(lo, hi)
+    return f"{p_lo:.{RANGE_DECIMALS}f}-{p_hi:.{RANGE_DECIMALS}f}"
+
+
 def _number(name: str, value: float) -> float:
     try:
         x = float(value)
@@ -392,7 +412,7 @@ def _check_height(model: BodyModel, g: float, height_cm: float) -> float:
     if not lo <= h <= hi:
         raise ShapeOutOfRange(
             "height_cm",
-            f"height_cm={h:g} is outside the supported range {lo:.1f}-{hi:.1f} cm for gender={g:g}",
+            f"height_cm={h:g} is outside the supported range {format_range(lo, hi)} cm for gender={g:g}",
             (lo, hi),
         )
     return h
@@ -437,7 +457,7 @@ def shape_from_measurements(
     if not m_lo <= m <= m_hi:
         raise ShapeOutOfRange(
             "weight_kg",
-            f"weight_kg={m:g} is outside the supported range {m_lo:.1f}-{m_hi:.1f} kg "
+            f"weight_kg={m:g} is outside the supported range {format_range(m_lo, m_hi)} kg "
             f"for gender={g:g}, height_cm={h:g}",
             (m_lo, m_hi),
         )

@@ -205,12 +205,12 @@ class ModelEngine:
         self.beta(spec)
 
     def beta(self, spec: OutfitSpec) -> np.ndarray:
-        from service.pipeline.body import ShapeOutOfRange, shape_from_measurements
+        from service.pipeline.body import ShapeOutOfRange, format_range, shape_from_measurements
 
         try:
             return shape_from_measurements(self.models.body, spec.gender, spec.height_cm, spec.weight_kg)
         except ShapeOutOfRange as e:
-            allowed = "a finite number" if e.allowed is None else f"{e.allowed[0]:.1f}-{e.allowed[1]:.1f}"
+            allowed = "a finite number" if e.allowed is None else format_range(*e.allowed)
             raise InvalidField(f"body.{e.field}", str(e), allowed) from None
 
     def make(self, spec: OutfitSpec) -> OutfitResult:

@@ -201,16 +201,24 @@ class TryOn:
         if cached is not None:
             self.metrics.cache.labels("hit").inc()
             return key, cached, True
-        if key not in self._inflight:
-            self.worker.check_room()  # refuse a full house before spending time on validation
-        try:
-            engine.validate(spec)  # before counting a miss: an invalid request is no cache lookup
-        except RefusedOrder:
-            self.metrics.rejected.labels("layer_order").inc()
-            raise
-        self.metrics.cache.labels("miss").inc()
         timeout = self.settings.request_timeout_s
-        future = self._submit(key, spec, engine, compression, time.monotonic() + timeout)
+        # A place in the pool before validating, so a full house is refused at once; validation runs
+        # off the event loop (tens of ms for three garments), so other requests are answered meanwhile.
+        reserved = key not in self._inflight
+        if reserved:
+            self.worker.reserve(time.monotonic() + timeout)
+        try:
+            try:
+                await asyncio.to_thread(engine.validate, spec)  # before counting a miss
+            except RefusedOrder:
+                self.metrics.rejected.labels("layer_order").inc()
+                raise
+            self.metrics.cache.labels("miss").inc()
+            future = self._submit(key, spec, engine, compression, time.monotonic() + timeout, reserved)
+            reserved = False  # the place is the job's now (or given back by a shared job)
+        finally:
+            if reserved:
+                self.worker.release()
         # asyncio.wait, not wait_for: a timeout must not cancel a job other requests share.
         wrapped = asyncio.wrap_future(future)
         # A job that ends after its request gave up still ends with a result or an exception (dropped
@@ -226,14 +234,18 @@ class TryOn:
             raise
 
     def _submit(
-        self, key: str, spec: OutfitSpec, engine: Engine, compression: str, deadline: float
+        self, key: str, spec: OutfitSpec, engine: Engine, compression: str, deadline: float, reserved: bool
     ) -> Future[OutfitResult]:
-        """One job per distinct outfit: identical concurrent requests share it."""
+        """One job per distinct outfit: identical concurrent requests share it (and give back the place
+        they ``reserved``)."""
         with self._inflight_lock:
             future = self._inflight.get(key)
             if future is not None:
+                if reserved:
+                    self.worker.release()
                 return future
-            future = self.worker.submit(lambda: self._compute(key, spec, engine, compression), deadline)
+            future = self.worker.submit(lambda: self._compute(key, spec, engine, compression), deadline,
+                                        reserved)  # fmt: skip
             self._inflight[key] = future
             self._gauges()
         future.add_done_callback(lambda _: self._done(key))

@@ -58,11 +58,14 @@ class BoundedWorker:
         return max(1, min(60, math.ceil(self._job_s * max(self._pending, 1) / self.workers)))
 
     def check_room(self) -> None:
-        """Raise ``Overloaded`` when every place is taken (a cheap early check; ``submit`` rechecks)."""
+        """Raise ``Overloaded`` when every place is taken."""
         if self._pending >= self.capacity:
             raise Overloaded(f"{self._pending} outfits in progress, at capacity", self.retry_after())
 
-    def submit(self, fn: Callable[[], T], deadline: float) -> Future[T]:
+    def reserve(self, deadline: float) -> None:
+        """Take a place for a job ``submit(..., reserved=True)`` will bring, or raise ``Overloaded`` at
+        once: a full house (or a wait past ``deadline``) is refused before the request is validated,
+        so a refusal never waits behind other requests' work. ``release`` a place left unused."""
         with self._lock:
             self.check_room()
             wait = self._job_s * (self._pending // self.workers + 1)
@@ -70,11 +73,21 @@ class BoundedWorker:
                 raise Overloaded(f"estimated wait {wait:.1f} s exceeds the request's time budget",
                                  self.retry_after())  # fmt: skip
             self._pending += 1
+
+    def release(self) -> None:
+        """Give back a place ``reserve`` took for a job that will not come (refused, or shared)."""
+        with self._lock:
+            self._pending -= 1
+
+    def submit(self, fn: Callable[[], T], deadline: float, reserved: bool = False) -> Future[T]:
+        """Queue ``fn``; in the place ``reserve`` took when ``reserved``, else in one taken now."""
+        if not reserved:
+            self.reserve(deadline)
         try:
             return self._pool.submit(self._run, fn, deadline)
         except RuntimeError:  # pool shut down
-            with self._lock:
-                self._pending -= 1
+            if not reserved:  # a reserved place is its reserver's to release
+                self.release()
             raise
 
     def _run(self, fn: Callable[[], T], deadline: float) -> T:

@@ -4,6 +4,7 @@ was."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 import service.geometry.bvh_kernel
 import service.geometry.closest
@@ -15,8 +16,33 @@ from service.process.paths import models_dir
 from tests.meshes import grid_mesh
 
 
-def test_timers_count_the_kernels_and_are_removed_after():
+class FakeClock:
+    """``perf_counter`` and ``process_time`` that move only when a test moves them: no timing here
+    depends on how busy the machine is."""
+
+    def __init__(self):
+        self.wall = self.cpu = 0.0
+
+    def perf_counter(self) -> float:
+        return self.wall
+
+    def process_time(self) -> float:
+        return self.cpu
+
+
+def test_timers_count_the_kernels_and_are_removed_after(monkeypatch):
     import onnxruntime as ort
+
+    import benchmarks.breakdown
+
+    ticking = FakeClock()
+
+    def tick() -> float:  # each reading a millisecond later: a timed call counts, however fast
+        ticking.wall += 1e-3
+        return ticking.wall
+
+    ticking.perf_counter = tick
+    monkeypatch.setattr(benchmarks.breakdown, "time", ticking)
 
     before = (ort.InferenceSession.run, service.geometry.closest.cKDTree,
               service.geometry.closest.QUERY_THREADS, service.pipeline.outfit.FIT_THREADS,
@@ -41,26 +67,31 @@ def test_timers_count_the_kernels_and_are_removed_after():
     assert after == before
 
 
-def test_the_world_clock_times_untangle_world_and_is_removed_after():
-    import time
-
+def test_the_world_clock_times_the_collision_passes_and_is_removed_after(monkeypatch):
+    import benchmarks.breakdown
     from benchmarks.breakdown import WORLD, _world_clock
 
-    before = service.pipeline.outfit.untangle_world
-    WORLD["wall"] = WORLD["cpu"] = 0.0
+    clock = FakeClock()
+    monkeypatch.setattr(benchmarks.breakdown, "time", clock)
+    calls = []
 
-    def busy(*args, **kwargs):  # a stand-in that spins one core for 50 ms
-        end = time.perf_counter() + 0.05
-        while time.perf_counter() < end:
-            pass
+    def stand_in(*args, **kwargs):  # 50 ms of wall time, 30 ms of it on a core
+        calls.append(args)
+        clock.wall += 0.05
+        clock.cpu += 0.03
+        if args == ("fails",):
+            raise ValueError("a failing call is timed too")
         return args
 
-    service.pipeline.outfit.untangle_world = busy
-    try:
-        with _world_clock():
-            assert service.pipeline.outfit.untangle_world(1, 2) == (1, 2)
-        assert service.pipeline.outfit.untangle_world is busy
-    finally:
-        service.pipeline.outfit.untangle_world = before
-    assert 0.05 <= WORLD["wall"] < 0.5
-    assert 0.5 < WORLD["cpu"] / WORLD["wall"] < 1.2  # one core busy
+    monkeypatch.setattr(service.pipeline.outfit, "untangle_world", stand_in)
+    WORLD["wall"] = WORLD["cpu"] = 0.0
+    with _world_clock():
+        assert service.pipeline.outfit.resolve is not stand_in  # wrapped
+        assert service.pipeline.outfit.resolve(1, 2) == (1, 2)
+        clock.wall += 1.0  # time outside resolve is not counted
+        clock.cpu += 1.0
+        with pytest.raises(ValueError):
+            service.pipeline.outfit.resolve("fails")
+    assert service.pipeline.outfit.resolve is stand_in
+    assert calls == [(1, 2), ("fails",)]
+    assert WORLD == {"wall": pytest.approx(0.1), "cpu": pytest.approx(0.06)}

@@ -69,7 +69,7 @@ def test_the_let_down_table_takes_the_pairs_with_a_lowering_on_every_corner(mode
     # tighter tops, shorts under pants; never the usual way (a T-shirt under a jacket)
     assert ("jacket", "tank_top") in pairs and ("shorts", "pants") in pairs
     assert ("tshirt", "jacket") not in pairs and ("pants", "shorts") not in pairs
-    assert all(models.lowering(*ids) is not None and not models.refusals(list(ids)) for ids in pairs)
+    assert all(models.pairs.lowering(*ids) is not None and not models.refusals(list(ids)) for ids in pairs)
     bodies = {beta for _, beta in asked}
     assert len(bodies) == 5 and {tuple(c) for c in corners()} <= bodies
     assert len(asked) == 5 * len(pairs)

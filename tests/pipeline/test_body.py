@@ -227,7 +227,7 @@ def test_weight_out_of_range_names_field_and_range(body):
         with pytest.raises(ShapeOutOfRange) as info:
             shape_from_measurements(body, 1.0, 165.0, weight_kg)
         assert str(info.value) == (
-            f"weight_kg={weight_kg:g} is outside the supported range {lo:.1f}-{hi:.1f} kg "
+            f"weight_kg={weight_kg:g} is outside the supported range 40.9-76.7 kg "
             "for gender=1, height_cm=165"
         )
         assert info.value.field == "weight_kg"

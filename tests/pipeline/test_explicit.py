@@ -176,7 +176,8 @@ def test_served_explicit_garments_stay_out_of_the_body_at_every_corner_of_the_bo
     exact corners of the supported box, which no training shape is."""
     pytest.importorskip("onnxruntime")
     from service.geometry.closest import ClosestPoint
-    from service.pipeline.outfit import CLEARANCE, OutfitModels, make_outfit
+    from service.pipeline.collisions.settings import SETTINGS
+    from service.pipeline.outfit import OutfitModels, make_outfit
 
     models = OutfitModels.load(threads=1)
     for beta in box_corners():
@@ -187,7 +188,7 @@ def test_served_explicit_garments_stay_out_of_the_body_at_every_corner_of_the_bo
     # The clearance step itself: points inside the mean body come out to CLEARANCE, others stay.
     mean = models.space.closest
     x = mean.vertices[::500] - 0.002 * mean.query(mean.vertices[::500]).normal  # 2 mm inside
-    moved = models.clear_of_body(x)
-    assert np.all(mean.query(moved).signed > 0.5 * CLEARANCE)  # out, about at the clearance
+    moved = models.clearance.clear_of_body(x)
+    assert np.all(mean.query(moved).signed > 0.5 * SETTINGS.clearance)  # out, about at the clearance
     far = mean.vertices[::500] + 0.02 * mean.query(mean.vertices[::500]).normal
-    np.testing.assert_array_equal(models.clear_of_body(far), far)
+    np.testing.assert_array_equal(models.clearance.clear_of_body(far), far)

@@ -4,6 +4,8 @@ faults. Hand-made layers over a flat body (the plane z = 0, outside +z)."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import trimesh
 
@@ -12,10 +14,11 @@ from service.geometry.closest import ClosestPoint
 from service.geometry.fold_side import FoldSides
 from service.geometry.intersections import intersecting_pairs, segment_crossings_reference
 from service.geometry.kept_queries import KeptQueries
-from service.pipeline.collisions.passes import DEEPEN, DEEPEN_RING, _deepen
-from service.pipeline.collisions.repair import Inner, RepairResult, RepairSettings, repair_layer
-from service.pipeline.collisions.squeeze import Outer, SqueezeSettings, squeeze_layer
-from service.pipeline.quality import Layer, penetration
+from service.pipeline.collisions.passes import _deepen
+from service.pipeline.collisions.repair import Inner, RepairResult, repair_layer
+from service.pipeline.collisions.settings import SETTINGS
+from service.pipeline.collisions.squeeze import Outer, squeeze_layer
+from service.pipeline.quality import PENETRATION_BAND, Layer, penetration
 from tests.meshes import grid_mesh
 
 
@@ -122,10 +125,10 @@ def test_the_repair_pushes_out_a_layer_inside_a_garment_whose_faces_are_wrongly_
     outer_v += [0.0037, 0.0023, 0]  # off the inner grid's edges: a segment through an edge crosses nothing
     n = len(outer_v)
     every = np.ones(n, dtype=bool)
-    settings = RepairSettings()
+    settings = SETTINGS
     mesh = ClosestPoint.build(inner_v, inner_f)
     flagged = np.ones(len(inner_f), dtype=bool)
-    sides = FoldSides.build(inner_v, inner_f, ClosestPoint.build(body_v, body_f), settings.band)
+    sides = FoldSides.build(inner_v, inner_f, ClosestPoint.build(body_v, body_f), PENETRATION_BAND)
     layer = Inner(mesh, False, every, every, reversed_faces=flagged, sides=sides)
     r = repair_layer(outer_v, outer_f, [layer], settings)
     assert r.crossing_pairs == 0 and r.inside == 0
@@ -176,7 +179,7 @@ def test_the_repair_lifts_a_layer_off_a_garment_worn_inside_out_instead_of_throu
     outer_v, outer_f = _sheet(16, 0.3, 0.011)  # 1 mm over it: within the margin
     n = len(outer_v)
     every = np.ones(n, dtype=bool)
-    settings = RepairSettings()
+    settings = SETTINGS
     mesh = ClosestPoint.build(inner_v, inner_f)
     turned = Inner(mesh, False, every, every, reversed_faces=np.ones(len(inner_f), dtype=bool))
     r = repair_layer(outer_v, outer_f, [turned], settings)
@@ -187,7 +190,7 @@ def test_the_repair_lifts_a_layer_off_a_garment_worn_inside_out_instead_of_throu
     off = outer_v + [0.0037, 0.0023, 0]
     flipped = repair_layer(off, outer_f, [turned], settings)
     body = ClosestPoint.build(*_box_body())
-    turned.sides = FoldSides.build(inner_v, inner_f, body, settings.band)
+    turned.sides = FoldSides.build(inner_v, inner_f, body, PENETRATION_BAND)
     by_parity = repair_layer(off, outer_f, [turned], settings)
     assert by_parity.moved.all()
     np.testing.assert_array_equal(by_parity.vertices, flipped.vertices)
@@ -206,7 +209,8 @@ def test_the_repair_reports_where_its_faults_are_on_the_inner_layer():
     mesh = ClosestPoint.build(inner_v, inner_f)
     # Uncovered: only the crossings' vertices move, after the first round, so one round leaves faults.
     nowhere = np.zeros(n, dtype=bool)
-    r = repair_layer(outer_v, outer_f, [Inner(mesh, False, every, nowhere)], RepairSettings(rounds=1))
+    one_round = replace(SETTINGS, repair_rounds=1)
+    r = repair_layer(outer_v, outer_f, [Inner(mesh, False, every, nowhere)], one_round)
     crossing = intersecting_pairs(r.vertices, outer_f, inner_v, inner_f)
     assert r.crossing_pairs == len(crossing) > 0
     # The corners of every inner triangle crossed, and of those closest to vertices under the sheet.
@@ -218,7 +222,7 @@ def test_the_repair_reports_where_its_faults_are_on_the_inner_layer():
 
 
 def test_a_vertex_with_a_larger_margin_is_pressed_that_much_deeper():
-    settings = SqueezeSettings()
+    settings = SETTINGS
     body = ClosestPoint.build(*_sheet(30, 0.5, 0.0))
     outer = ClosestPoint.build(*_sheet(24, 0.4, 0.02))
     v, f = _sheet(20, 0.3, 0.03)
@@ -226,7 +230,8 @@ def test_a_vertex_with_a_larger_margin_is_pressed_that_much_deeper():
     margin = np.full(len(v), settings.margin)
     deep = np.linalg.norm(v[:, :2], axis=1) < 0.05
     margin[deep] = 0.006
-    squeeze = SqueezeSettings(ring=0, smoothing=0, relax=0)  # no spreading: each vertex where it was sent
+    # No spreading: each vertex where it was sent.
+    squeeze = replace(SETTINGS, squeeze_ring=0, squeeze_smoothing=0, squeeze_relax=0)
     r = squeeze_layer(v, f, [Outer(outer, every, every)], body, settings.margin, squeeze, margin=margin)
     depth = 0.02 - r.vertices[:, 2]
     np.testing.assert_allclose(depth[deep], 0.006, atol=1e-9)
@@ -240,17 +245,17 @@ def test_a_pass_with_faults_deepens_the_squeeze_around_them_on_the_inner_garment
     faulty = RepairResult(v, np.zeros(len(v), dtype=bool), 1, 3, 0, [], [np.zeros(0, int), np.array([60])])
     clean = RepairResult(v, np.zeros(len(v), dtype=bool), 1, 0, 0, [], [np.zeros(0, int)])
     _deepen([clean, faulty], [f, f], deep, pressed)
-    # Garment 0 under garment 1, around its vertex 60 (DEEPEN_RING rings along the edges); garment 1
+    # Garment 0 under garment 1, around its vertex 60 (SETTINGS.deepen_ring rings along the edges); garment 1
     # untouched.
     rings = np.zeros(len(v), dtype=bool)
     rings[60] = True
     edges = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
-    for _ in range(DEEPEN_RING):
+    for _ in range(SETTINGS.deepen_ring):
         reached = rings[edges].any(axis=1)
         rings[edges[reached].ravel()] = True
     assert set(pressed) == {(0, 1)}
     np.testing.assert_array_equal(pressed[(0, 1)], rings)
-    np.testing.assert_allclose(deep[0][rings], 0.002 + DEEPEN)
+    np.testing.assert_allclose(deep[0][rings], 0.002 + SETTINGS.deepen)
     np.testing.assert_array_equal(deep[0][~rings], 0.002)
     np.testing.assert_array_equal(deep[1], 0.002)
 

@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from service.pipeline.collisions import junctions
-from service.pipeline.collisions.layering import STEP, junction_run
+from service.pipeline.collisions.layering import junction_run
+from service.pipeline.collisions.settings import SETTINGS
 from tests.pipeline import test_layering
 from tests.pipeline.test_layering import closed, profile, tube
 
@@ -30,13 +31,14 @@ def test_the_outer_crotch_comes_down_below_the_inner_one_and_nothing_else_moves(
     run = junction_run(mini, pants, legs_body)
     drop = junctions.lowering(mini, pants, legs_body, pants_v)
     assert drop.shape == pants_v.shape and np.all(drop[:, :2] == 0) and np.all(drop[:, 2] <= 0)
-    assert drop[:, 2].max() == 0 and -drop[:, 2].min() == pytest.approx(run[0] * STEP + junctions.EXTRA)
+    depth = run[0] * SETTINGS.slice_step + SETTINGS.extra
+    assert drop[:, 2].max() == 0 and -drop[:, 2].min() == pytest.approx(depth)
     saddle = pants_v[np.argmin(drop[:, 2])]
     r = np.linalg.norm(pants_v - saddle, axis=1)
-    radius = max(junctions.RADIUS * (run[0] * STEP + junctions.EXTRA), junctions.MIN_RADIUS)
+    radius = max(SETTINGS.bump_radius * depth, SETTINGS.min_bump_radius)
     moved = drop[:, 2] < 0
     assert np.all(r[moved] < radius)  # the bump's reach
-    assert np.all(pants_v[moved, 2] < saddle[2] + junctions.GATE)  # the waistband above stays
+    assert np.all(pants_v[moved, 2] < saddle[2] + SETTINGS.gate)  # the waistband above stays
     assert abs(saddle[0]) < 0.02  # between the legs
     # the other order, and an inner garment whose junction is no lower: nothing to let down
     assert junctions.lowering(pants, mini, legs_body, closed(tube(0.22, 0.77, 1.05))[0]) is None
@@ -51,7 +53,7 @@ def test_each_garment_let_down_around_the_same_one_takes_its_own_room(legs_body)
     pants = profile("pants", legs_body, *parts)
     mini = profile("mini", legs_body, tube(0.22, 0.77, 1.05))
     alone, below = (junctions.lowering(mini, pants, legs_body, pants_v, between) for between in (0, 1))
-    assert -below[:, 2].min() == pytest.approx(-alone[:, 2].min() + junctions.EXTRA)
+    assert -below[:, 2].min() == pytest.approx(-alone[:, 2].min() + SETTINGS.extra)
     assert np.all(below[:, 2] <= alone[:, 2])
     assert (below[:, 2] < alone[:, 2]).sum() > (alone[:, 2] < 0).sum() // 2  # the bump grows with the drop
 
@@ -73,7 +75,7 @@ def test_the_drop_is_read_on_the_body_the_garments_are_worn_on(legs_body):
             whole = profile("mini", legs_body, tube(0.22, hem, 1.05))
             assert junction_run(whole, pants, legs_body)[0] == length
         drop = junctions.lowering(mini, pants, legs_body, pants_v, length=length)
-        assert -drop[:, 2].min() == pytest.approx(length * STEP + junctions.EXTRA)
+        assert -drop[:, 2].min() == pytest.approx(length * SETTINGS.slice_step + SETTINGS.extra)
         drapes = junctions.lowering(mini, pants, legs_body, pants_v)
         assert np.argmin(drop[:, 2]) == np.argmin(drapes[:, 2])  # the same saddle
 
@@ -102,10 +104,10 @@ def test_a_top_tucked_into_pants_is_gathered_up_above_their_crotch(legs_body):
     assert np.all(shift[:, :2] == 0) and np.all(shift[:, 2] >= 0)
     z = top_v[:, 2] + shift[:, 2]
     hem = np.linalg.norm(top_v[:, :2], axis=1) < 0.21
-    assert z[hem].min() == pytest.approx(crotch + junctions.EXTRA)
+    assert z[hem].min() == pytest.approx(crotch + SETTINGS.extra)
     order = np.argsort(top_v[hem, 2], kind="stable")
     assert np.all(np.diff(z[hem][order]) >= -1e-12)
-    top_of_gather = crotch + junctions.EXTRA + max(junctions.GATE, crotch + junctions.EXTRA - 0.7)
+    top_of_gather = crotch + SETTINGS.extra + max(SETTINGS.gate, crotch + SETTINGS.extra - 0.7)
     assert np.all(shift[top_v[:, 2] >= top_of_gather, 2] == 0)
     assert np.all(shift[~hem, 2] == 0)  # the cuff beside the hips
     # a top whose hem is above the crotch, and the pants' crotch for a top that hangs no lower: nothing
@@ -122,15 +124,15 @@ def test_drops_and_rises_combine_per_vertex():
 
 
 def test_a_room_in_place_of_extra_comes_down_that_much_further(legs_body):
-    # junctions.ROOMS: an outfit left crossing is made again with more room below the junction; the
+    # SETTINGS.rooms: an outfit left crossing is made again with more room below the junction; the
     # drop is the run plus the room, once per garment let down around the same inner one.
     parts = (tube(0.18, 0.8, 1.05), tube(0.08, 0.1, 0.8, -0.09), tube(0.08, 0.1, 0.8, 0.09))
     pants_v, _ = closed(*parts)
     pants = profile("pants", legs_body, *parts)
     mini = profile("mini", legs_body, tube(0.22, 0.77, 1.05))
     run = junction_run(mini, pants, legs_body)[0]
-    assert junctions.ROOMS[0] == junctions.EXTRA and list(junctions.ROOMS) == sorted(set(junctions.ROOMS))
-    for room in junctions.ROOMS:
+    assert SETTINGS.rooms[0] == SETTINGS.extra and list(SETTINGS.rooms) == sorted(set(SETTINGS.rooms))
+    for room in SETTINGS.rooms:
         for between in (0, 1):
             drop = junctions.lowering(mini, pants, legs_body, pants_v, between, extra=room)
-            assert -drop[:, 2].min() == pytest.approx(run * STEP + room * (1 + between))
+            assert -drop[:, 2].min() == pytest.approx(run * SETTINGS.slice_step + room * (1 + between))

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from service.pipeline import layering
+from service.pipeline.collisions import layering
 from service.pipeline.collisions.layering import (
     BodySlices,
     GarmentProfile,
@@ -17,6 +17,7 @@ from service.pipeline.collisions.layering import (
     hull_perimeter,
     slice_loops,
 )
+from service.pipeline.collisions.settings import SETTINGS
 
 
 def tube(radius: float, z0: float, z1: float, x: float = 0.0, sections: int = 48) -> trimesh.Trimesh:
@@ -98,7 +99,7 @@ def test_the_junction_run_is_how_far_a_crotch_hangs_below_the_other_one(legs_bod
 
 def test_an_outer_garment_too_small_to_stretch_over_the_body_is_refused(legs_body):
     leg = 2 * 32 * 0.07 * np.sin(np.pi / 32)  # the body's leg perimeter
-    tight = 0.07 * 0.97 / (1 + layering.STRETCH_LIMIT)  # stretched by the limit: 3 % short of the leg
+    tight = 0.07 * 0.97 / (1 + SETTINGS.stretch_limit)  # stretched by the limit: 3 % short of the leg
     inner = profile("inner", legs_body, tube(0.075, 0.2, 0.6, -0.09))
     small = profile("small", legs_body, tube(tight, 0.3, 0.5, -0.09))
     fits = profile("fits", legs_body, tube(0.076, 0.3, 0.5, -0.09))
@@ -106,7 +107,7 @@ def test_an_outer_garment_too_small_to_stretch_over_the_body_is_refused(legs_bod
     (refusal,) = layering.refusals(profiles, ["inner", "small"], legs_body)
     assert (
         refusal.outer == "small"
-        and f"needs {100 * (leg + 2 * np.pi * layering.LAYER_GAP):.0f} cm" in refusal.reason
+        and f"needs {100 * (leg + 2 * np.pi * SETTINGS.margin):.0f} cm" in refusal.reason
     )
     assert layering.refusals(profiles, ["inner", "fits"], legs_body) == []
 

@@ -13,8 +13,8 @@ import trimesh
 
 from benchmarks.orders import PENETRATION_LIMIT
 from service.cli import main
-from service.pipeline.collisions.junctions import EXTRA
-from service.pipeline.outfit import CLEARANCE, DEFAULT_REPAIR, SHIFT_STEP, OutfitModels, make_outfit
+from service.pipeline.collisions.settings import SETTINGS
+from service.pipeline.outfit import OutfitModels, make_outfit
 from service.pipeline.strain import RestShape, green_strain_norms
 from training.drape.dataset import sample_betas
 
@@ -138,12 +138,12 @@ def test_side_by_side_fits_equal_one_after_the_other(models, held_out_beta):
 
     def layer_fields(k, x, gradient):
         if k == 0:
-            return models.body_field(x, gradient)
+            return models.clearance.body_field(x, gradient)
         return models.fields(layer_ids[k], x, held_out_beta, gradient)
 
     op = models.untangler("neural")
     explicit = [models.explicit[gid].canonical(held_out_beta) for gid in ids]
-    bounds = models.far_bounds(ids, explicit, explicit)
+    bounds = models.pairs.far_bounds(ids, explicit, explicit)
     for i, (gid, world, faces) in enumerate(out.garments):
         fitted = fit_garment(explicit[i], faces, i + 1, len(layer_ids), layer_fields, op, DEFAULT_FIT,
                              bounds[i]).vertices  # fmt: skip
@@ -181,8 +181,8 @@ def test_the_far_bounds_are_below_the_distances_on_every_body(models, held_out_b
 
     ids = ["pants", "tshirt", "jacket", "skirt"]
     for beta in [held_out_beta, *corners()]:
-        explicit = [models.clear_of_body(models.explicit[g].canonical(beta)) for g in ids]
-        bounds = models.far_bounds(ids, explicit, explicit)
+        explicit = [models.clearance.clear_of_body(models.explicit[g].canonical(beta)) for g in ids]
+        bounds = models.pairs.far_bounds(ids, explicit, explicit)
         for i, x in enumerate(explicit):
             for k, g in enumerate(ids):
                 if k == i:
@@ -199,12 +199,12 @@ def test_an_outer_garment_comes_down_around_a_lower_junction(models, held_out_be
     # outer garment is let down there (collisions.junctions) and the pair comes out clean; without
     # that, the same pair on the same body crosses (164 and 40 pairs when this was written) where the
     # repair only pushes (no ``lifts``, which since clear the long sleeve's alone).
-    assert models.lowering(*ids) is not None
+    assert models.pairs.lowering(*ids) is not None
     r = make_outfit(models, ids, held_out_beta, measure=True).report
     assert r["collision_free"] and _tangle(r, "after") == (0, 0.0)
-    monkeypatch.setattr(models, "lowering", lambda *asked: None)
-    pushes_only = replace(DEFAULT_REPAIR, lift=0.0)
-    r = make_outfit(models, ids, held_out_beta, measure=False, repair_settings=pushes_only).report
+    monkeypatch.setattr(models.pairs, "lowering", lambda *asked: None)
+    pushes_only = replace(SETTINGS, lift=0.0)
+    r = make_outfit(models, ids, held_out_beta, measure=False, collisions=pushes_only).report
     assert r["crossing_pairs"] > 0
 
 
@@ -213,15 +213,15 @@ def test_the_outer_of_two_tops_let_down_around_a_jacket_comes_down_below_the_inn
     # the T-shirt, takes its own room below the T-shirt's (one EXTRA more), not the same saddle. Each
     # drop is read on the body (the garments' explicit meshes there, junctions.body_run).
     asked = []
-    lowering = models.lowering
-    monkeypatch.setattr(models, "lowering", lambda *a: asked.append(a) or lowering(*a))
+    lowering = models.pairs.lowering
+    monkeypatch.setattr(models.pairs, "lowering", lambda *a: asked.append(a) or lowering(*a))
     beta = sample_betas(2, 3)[1]
     make_outfit(models, ["jacket", "tshirt", "tank_top"], beta, measure=False, untangle_layers=False)
     down = [(a[:3], lowering(*a)) for a in asked]
     assert [key for key, d in down if d is not None] == [("jacket", "tshirt", 0), ("jacket", "tank_top", 1)]
     (on,) = [a[3] for a in asked if a[:2] == ("jacket", "tank_top")]
     alone, lower = lowering("jacket", "tank_top", 0, on), lowering("jacket", "tank_top", 1, on)
-    assert lower[:, 2].min() == pytest.approx(alone[:, 2].min() - EXTRA)
+    assert lower[:, 2].min() == pytest.approx(alone[:, 2].min() - SETTINGS.extra)
     asked.clear()
     make_outfit(models, ["jacket", "tshirt"], beta, measure=False, untangle_layers=False)
     assert [a[:3] for a in asked] == [("jacket", "tshirt", 0)]  # a pair: nothing between
@@ -235,11 +235,11 @@ def test_a_long_top_tucked_into_pants_is_gathered_above_their_crotch(models, hel
     # over the faces of a fold that face the body (issue 21's seventh round): now it is clean either way
     # on this body, so the test checks that the gathering is what the jacket gets, not that it is needed.
     ids = ["jacket", "pants"]
-    assert models.raising(*ids) is not None and models.lowering(*ids) is None
+    assert models.pairs.raising(*ids) is not None and models.pairs.lowering(*ids) is None
     outfit = make_outfit(models, ids, held_out_beta, measure=True)
     pairs, inside = _tangle(outfit.report, "after")
     assert pairs == 0 and inside <= PENETRATION_LIMIT / 100
-    monkeypatch.setattr(models, "raising", lambda inner, outer: None)
+    monkeypatch.setattr(models.pairs, "raising", lambda inner, outer: None)
     plain = make_outfit(models, ids, held_out_beta, measure=False)
     jacket, jacket_plain = outfit.garments[0][1], plain.garments[0][1]
     assert np.abs(jacket - jacket_plain).max() > 0.01  # the gathering moved the hem by centimetres
@@ -253,8 +253,8 @@ def test_garments_worn_the_usual_way_are_not_let_down(models):
 
     usual = {pair for ids in OUTFITS for pair in itertools.combinations(ids, 2)}
     for inner, outer in sorted(usual | {("tshirt", "pants"), ("pants", "skirt")}):
-        assert models.lowering(inner, outer) is None, (inner, outer)
-        assert models.raising(inner, outer) is None, (inner, outer)
+        assert models.pairs.lowering(inner, outer) is None, (inner, outer)
+        assert models.pairs.raising(inner, outer) is None, (inner, outer)
 
 
 def test_the_report_counts_every_crossing_left(models):
@@ -278,51 +278,54 @@ def test_a_garment_let_down_far_is_cleared_of_the_body_on_the_way(models, held_o
     # and tore (strain max 5.5 -> 67 on this body when this was written, 31-84 on ten held-out bodies);
     # moved in 1 cm steps, each cleared, the sleeve rests on the arm and keeps the lowering's own strain.
     ids = ["jacket", "long_sleeve", "tshirt"]
-    jacket, _, tshirt = [models.clear_of_body(models.explicit[g].canonical(held_out_beta)) for g in ids]
-    shift = models.lowering("jacket", "tshirt", 1, (jacket, tshirt))
+    clear = models.clearance.clear_of_body
+    jacket, _, tshirt = [clear(models.explicit[g].canonical(held_out_beta)) for g in ids]
+    shift = models.pairs.lowering("jacket", "tshirt", 1, (jacket, tshirt))
     assert np.abs(shift).max() > 0.2
-    stepped = models.shifted_clear_of_body(tshirt, shift)
+    stepped = models.clearance.shifted_clear_of_body(tshirt, shift)
     rest = RestShape.build(tshirt, models.catalog["tshirt"].faces)
     lowered, once, steps = (green_strain_norms(x, rest).max() for x in (
-        tshirt + shift, models.clear_of_body(tshirt + shift), stepped))  # fmt: skip
+        tshirt + shift, models.clearance.clear_of_body(tshirt + shift), stepped))  # fmt: skip
     assert once > 4 * lowered  # what the steps are for: cleared at once, this body's T-shirt tears
     assert steps <= 1.2 * lowered, (lowered, steps)
-    assert models.exact_body_distance(stepped)[0].min() > 0.5 * CLEARANCE  # out, as test_explicit's
+    # Out, as test_explicit's.
+    assert models.clearance.exact_body_distance(stepped)[0].min() > 0.5 * SETTINGS.clearance
     still = np.all(shift == 0, axis=1)
     np.testing.assert_array_equal(stepped[still], tshirt[still])
-    small = np.where(still[:, None], 0.0, np.array([0.0, 0.0, -0.5 * SHIFT_STEP]))  # one step: as before
-    once = models.clear_of_body(tshirt + small)
-    np.testing.assert_array_equal(models.shifted_clear_of_body(tshirt, small), once)
+    small = np.where(still[:, None], 0.0, np.array([0.0, 0.0, -0.5 * SETTINGS.shift_step]))  # one step
+    once = models.clearance.clear_of_body(tshirt + small)
+    np.testing.assert_array_equal(models.clearance.shifted_clear_of_body(tshirt, small), once)
 
 
 @pytest.mark.parametrize("left, chosen", [((5, 3, 4), 1), ((3, 5, 4), 0), ((0, 5, 5), 0), ((5, 4, 0), 2)])
 def test_a_let_down_outfit_left_crossing_is_made_again_with_the_next_room(models, monkeypatch, left, chosen):
     # The jacket under the T-shirt is let down; where the repair leaves crossings (stubbed: ``left`` per
-    # attempt), the outfit is made again with junctions.ROOMS' next room, and the attempt with the fewest
+    # attempt), the outfit is made again with SETTINGS.rooms' next room, and the attempt with the fewest
     # faults is what comes back, meshes and report; a clean first attempt is the only one.
-    from service.pipeline.collisions import junctions, outfit
+    from service.pipeline import outfit
+    from service.pipeline.collisions.passes import Resolved
     from service.pipeline.collisions.repair import RepairResult
 
     rooms, calls = [], []
-    lowering = models.lowering
-    monkeypatch.setattr(models, "lowering", lambda *a: rooms.append(a[4]) or lowering(*a))
+    lowering = models.pairs.lowering
+    monkeypatch.setattr(models.pairs, "lowering", lambda *a: rooms.append(a[4]) or lowering(*a))
 
-    def untangle_world(models_, layer_ids, beta, body, explicit, fitted, world, faces, settings, lowered):
+    def resolve(stack, body, explicit, fitted, world, lowered, settings):
         n = left[len(calls)]
         calls.append(([x.copy() for x in explicit], world))
         out = [x + len(calls) for x in world]  # tells the attempts apart
         crossing = [0] * (len(out) - 1) + [n]  # all on the outermost garment
-        return out, [RepairResult(x, np.zeros(len(x), bool), 1, c, 0)
-                     for x, c in zip(out, crossing, strict=True)]
+        return Resolved(out, [RepairResult(x, np.zeros(len(x), bool), 1, c, 0)
+                              for x, c in zip(out, crossing, strict=True)])
 
-    monkeypatch.setattr(outfit, "untangle_world", untangle_world)
+    monkeypatch.setattr(outfit, "resolve", resolve)
     beta = sample_betas(2, 3)[1]
     ids = ["jacket", "tshirt"]
     r = make_outfit(models, ids, beta, measure=False)
-    assert len(junctions.ROOMS) == len(left)
+    assert len(SETTINGS.rooms) == len(left)
     attempts = next((k + 1 for k, n in enumerate(left) if n == 0), len(left))  # up to the first clean one
     assert r.report["attempts"] == len(calls) == attempts
-    assert sorted(set(rooms)) == sorted(junctions.ROOMS[:attempts])
+    assert sorted(set(rooms)) == sorted(SETTINGS.rooms[:attempts])
     assert r.report["crossing_pairs"] == left[chosen]
     for (_, x, _), fitted in zip(r.garments, calls[chosen][1], strict=True):
         np.testing.assert_array_equal(x, fitted + (chosen + 1))

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import trimesh
 
@@ -10,11 +12,11 @@ from service.geometry.intersections import intersecting_pairs
 from service.geometry.kept_queries import KeptQueries
 from service.pipeline.collisions.repair import (
     Inner,
-    RepairSettings,
     _faces_around,
     lifts,
     repair_layer,
 )
+from service.pipeline.collisions.settings import SETTINGS
 from tests.meshes import sheet
 
 _sheet = sheet
@@ -33,7 +35,7 @@ def test_a_sheet_crossing_an_inner_sheet_is_lifted_above_it_and_only_there():
     assert len(intersecting_pairs(outer_v, outer_f, inner_v, inner_f)) > 0
     n = len(outer_v)
     inner = [Inner(ClosestPoint.build(inner_v, inner_f), False, _everywhere(n), _everywhere(n))]
-    settings = RepairSettings()
+    settings = SETTINGS
     r = repair_layer(outer_v, outer_f, inner, settings)
     assert r.crossing_pairs == 0
     assert len(intersecting_pairs(r.vertices, outer_f, inner_v, inner_f)) == 0
@@ -46,7 +48,7 @@ def test_a_sheet_crossing_an_inner_sheet_is_lifted_above_it_and_only_there():
 
 def test_lifted_corners_end_margin_above_the_inner_triangle_along_its_layers_normal():
     rng = np.random.default_rng(3)
-    settings = RepairSettings(lift=1.0)  # no cap
+    settings = replace(SETTINGS, lift=1.0)  # no cap
     f = np.array([[0, 1, 2]])
     checked = 0
     for _ in range(300):
@@ -71,7 +73,7 @@ def test_lifted_corners_end_margin_above_the_inner_triangle_along_its_layers_nor
         np.testing.assert_allclose(lifted[at] @ normal, top + settings.margin, atol=1e-12)
         assert not len(intersecting_pairs(lifted, f, inner_v, f))
     assert checked > 20
-    capped = RepairSettings(lift=0.001)
+    capped = replace(SETTINGS, lift=0.001)
     outer_v, layer = crossing
     at, moves = lifts(outer_v, [f], [np.array([[0, 0]])], [(layer, np.array([0]))], capped)
     assert len(at) and np.linalg.norm(moves, axis=1).max() <= capped.lift + 1e-12
@@ -85,7 +87,7 @@ def test_a_corner_lifts_along_the_outer_side_of_a_reversed_inner_face():
     for turned, up in ((None, 1.0), (np.array([True]), -1.0)):
         layer = Inner(mesh, False, _everywhere(3), _everywhere(3), reversed_faces=turned)
         pair = [np.array([[0, 0]])]
-        at, moves = lifts(outer_v, [f], pair, [(layer, np.array([0]))], RepairSettings(lift=1.0))
+        at, moves = lifts(outer_v, [f], pair, [(layer, np.array([0]))], replace(SETTINGS, lift=1.0))
         assert len(at) and np.all(np.sign(moves[:, 2]) == up)
 
 
@@ -97,7 +99,7 @@ def test_a_corner_in_several_pairs_takes_its_largest_lift():
     outer_v = np.array([[0.0, 0.0, 0.0], [0.01, 0.0, 0.05], [0.0, 0.01, 0.05]])
     assert len(intersecting_pairs(outer_v, f, inner_v, inner_f)) == 2
     layer = Inner(ClosestPoint.build(inner_v, inner_f), False, _everywhere(3), _everywhere(3))
-    settings = RepairSettings(lift=1.0)
+    settings = replace(SETTINGS, lift=1.0)
     at, moves = lifts(outer_v, [f], [np.array([[0, 0], [0, 1]])], [(layer, np.array([0, 1]))], settings)
     np.testing.assert_array_equal(at, [0])  # the two corners above both stay
     np.testing.assert_allclose(moves, [[0.0, 0.0, 0.03 + settings.margin]], atol=1e-12)
@@ -111,10 +113,10 @@ def test_a_fold_poking_between_the_corners_of_a_coarse_outer_sheet_is_lifted_cle
     assert len(intersecting_pairs(outer_v, outer_f, inner_v, inner_f)) > 0
     n = len(outer_v)
     inner = [Inner(ClosestPoint.build(inner_v, inner_f), False, _everywhere(n), _everywhere(n))]
-    lifted = repair_layer(outer_v, outer_f, inner, RepairSettings(rounds=3))
+    lifted = repair_layer(outer_v, outer_f, inner, replace(SETTINGS, repair_rounds=3))
     assert lifted.crossing_pairs == 0
     assert len(intersecting_pairs(lifted.vertices, outer_f, inner_v, inner_f)) == 0
-    kicked = repair_layer(outer_v, outer_f, inner, RepairSettings(rounds=3, lift=0.0))
+    kicked = repair_layer(outer_v, outer_f, inner, replace(SETTINGS, repair_rounds=3, lift=0.0))
     assert kicked.crossing_pairs > 0  # kicked along its own normal, 2 mm a round, it is still through
 
 
@@ -136,9 +138,9 @@ def test_nothing_ends_inside_a_closed_body():
     v, f = _sheet(30, 0.3, lambda v: 0.07 + 0.0 * v[:, 0])
     n = len(v)
     inner = [Inner(ClosestPoint.build(body.vertices, body.faces), True, _everywhere(n), _everywhere(n))]
-    r = repair_layer(v, f, inner, RepairSettings(rounds=10))
+    r = repair_layer(v, f, inner, replace(SETTINGS, repair_rounds=10))
     assert r.crossing_pairs == 0
-    assert np.linalg.norm(r.vertices, axis=1).min() >= 0.1 + RepairSettings().margin - 2e-4
+    assert np.linalg.norm(r.vertices, axis=1).min() >= 0.1 + SETTINGS.margin - 2e-4
     assert len(intersecting_pairs(r.vertices, f, body.vertices, body.faces)) == 0
 
 

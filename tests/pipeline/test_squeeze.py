@@ -8,7 +8,8 @@ import numpy as np
 
 from service.geometry.closest import ClosestPoint
 from service.geometry.intersections import intersecting_pairs
-from service.pipeline.collisions.squeeze import Outer, SqueezeSettings, squeeze_layer
+from service.pipeline.collisions.settings import SETTINGS, CollisionSettings
+from service.pipeline.collisions.squeeze import Outer, squeeze_layer
 from tests.meshes import grid_mesh
 
 
@@ -17,19 +18,19 @@ def _sheet(n: int, size: float, z: float):
     return (v - [0.5, 0.5, 0]) * [size, size, 0] + [0, 0, z], f
 
 
-def _squeeze(inner_z: float, outer_z: float, settings: SqueezeSettings | None = None):
+def _squeeze(inner_z: float, outer_z: float, settings: CollisionSettings | None = None):
     body = ClosestPoint.build(*_sheet(30, 0.5, 0.0))
     outer = ClosestPoint.build(*_sheet(24, 0.4, outer_z))
     v, f = _sheet(20, 0.3, inner_z)
     covered = v[:, 0] < 0  # the outer layer covers the half x < 0 (a waistband along x = 0)
     near = np.ones(len(v), dtype=bool)
-    settings = settings or SqueezeSettings()
+    settings = settings or SETTINGS
     return v, f, outer, squeeze_layer(v, f, [Outer(outer, near, covered)], body, settings.margin, settings)
 
 
 def test_a_loose_inner_layer_is_pressed_under_the_outer_one_where_it_covers_it():
     # The inner sheet hangs 1 cm outside the outer one (2 cm off the body, the outer at 1 cm).
-    settings = SqueezeSettings()
+    settings = SETTINGS
     v, f, outer, r = _squeeze(0.02, 0.01, settings)
     assert r.outside == 0
     x = r.vertices
@@ -57,7 +58,7 @@ def test_an_inner_layer_already_inside_is_left_alone():
 def test_an_outer_layer_on_the_skin_leaves_the_inner_one_at_the_margin_for_the_repair():
     # No room under an outer layer 1 mm off the body: the inner one goes to the body margin and stays
     # outside it, counted, for the repair to lift the outer layer over it.
-    settings = SqueezeSettings()
+    settings = SETTINGS
     v, _, _, r = _squeeze(0.02, 0.001, settings)
     covered = v[:, 0] < -0.03
     np.testing.assert_allclose(r.vertices[covered, 2], settings.margin, atol=1e-9)
@@ -66,7 +67,7 @@ def test_an_outer_layer_on_the_skin_leaves_the_inner_one_at_the_margin_for_the_r
 
 def test_the_floor_keeps_room_for_the_garments_under_the_squeezed_one():
     # The third garment of a stack stops 6 mm off the body, where an outer layer on the skin leaves it.
-    settings = SqueezeSettings()
+    settings = SETTINGS
     body = ClosestPoint.build(*_sheet(30, 0.5, 0.0))
     outer = ClosestPoint.build(*_sheet(24, 0.4, 0.001))
     v, f = _sheet(20, 0.3, 0.02)
@@ -79,7 +80,7 @@ def test_cloth_hanging_far_outside_is_pulled_in_when_the_outer_layer_lies_betwee
     # An inner sheet 8 cm off the body, 7 cm outside the outer sheet: beyond the band, and the field
     # says "not covered" (a loose sleeve under a narrower one). The segment from each vertex's body
     # point to it crosses the outer sheet once: it is under it.
-    settings = SqueezeSettings()
+    settings = SETTINGS
     body = ClosestPoint.build(*_sheet(30, 0.5, 0.0))
     outer = ClosestPoint.build(*_sheet(24, 0.4, 0.01))
     v, f = _sheet(20, 0.3, 0.08)
@@ -106,7 +107,7 @@ def test_the_segment_test_finds_cloth_the_fields_put_far_from_the_outer_layer():
     # The same hanging sheet, where the outer layer's fields (read at another mesh: the outer garment
     # before it was let down) put no vertex within reach of it: the segment test is asked anyway, and
     # the sheet comes in as when every vertex was near.
-    settings = SqueezeSettings()
+    settings = SETTINGS
     body = ClosestPoint.build(*_sheet(30, 0.5, 0.0))
     outer = ClosestPoint.build(*_sheet(24, 0.4, 0.01))
     v, f = _sheet(20, 0.3, 0.08)
@@ -152,7 +153,8 @@ def test_with_past_rim_cloth_beyond_the_outer_layers_rim_is_not_pulled_under_it(
     outer = ClosestPoint.build(*_sheet(24, 0.2, 0.01))
     v, f = _sheet(40, 0.3, 0.015)
     every = np.ones(len(v), dtype=bool)
-    plain = SqueezeSettings(ring=0, smoothing=0, relax=0)  # no spreading: only the pulled vertices move
+    # No spreading: only the pulled vertices move.
+    plain = replace(SETTINGS, squeeze_ring=0, squeeze_smoothing=0, squeeze_relax=0)
     past = np.abs(v[:, :2]).max(axis=1) > 0.1
     layer = [Outer(outer, every, every)]
     default = squeeze_layer(v, f, layer, body, plain.margin, plain)

@@ -1,22 +1,27 @@
-"""Exact collision repair of the fitted outfit in world space: the guarantee behind the fields.
+"""Exact collision repair of one garment in world space, against its final inner layers.
 
-The field fit (``service.pipeline.fit``) untangles the layers as the learned fields see them; those are ~1-2
-mm off the meshes, and a fitted mesh can still cross an inner one by that much. This pass makes the returned
-meshes satisfy the quality measures of docs/design.md section 7 exactly, layer by layer from the body outwards
-(inner layers are final when an outer one is repaired):
+The field fit (``service.pipeline.fit``) untangles the layers as the learned fields see them; those are
+~1-2 mm off the meshes, and a fitted mesh can still cross an inner one by that much. This pass moves the
+layer outwards, round by round, towards the quality measures of docs/design.md section 7 (no triangle
+crossing an inner layer, no vertex inside one), layer by layer from the body outwards (inner layers are
+final when an outer one is repaired). It does not promise to get there: it keeps the round with the
+fewest faults (crossing pairs, then vertices inside), stops after ``repair_rounds`` rounds or
+``repair_patience`` rounds without a new fewest, and returns that round with the faults it left
+(``RepairResult``). Each round:
 
 1. Vertices of the layer closer than ``margin`` to an inner layer on its outer side, or on its inner
-   side within ``band`` where the inner garment covers (its covariant field h < 0, as in
+   side within ``PENETRATION_BAND`` where the inner garment covers (its covariant field h < 0, as in
    ``service.pipeline.quality.penetration``), move along the inner layer's normal to ``margin`` outside it.
    The body is a closed mesh: every vertex inside it or closer than ``margin`` moves out.
-2. The displacement spreads over ``ring`` rings of neighbours (Laplacian diffusion with the moved
+2. The displacement spreads over ``repair_ring`` rings of neighbours (Laplacian diffusion with the moved
    vertices held), so a push lifts a patch instead of a spike.
 3. Exact edge-triangle tests find the triangle pairs still crossing (an inner bump poking between
    outer vertices); their outer vertices get a larger margin (``growth``, up to ``max_margin``)
    and, in the next round, their corners are lifted along the inner surface's normal clear of the
    inner triangles they cross (``lifts``), and the loop repeats.
 
-Everything is local to the vertices that the fields place within ``REACH`` of an inner layer (the
+Everything is local to the vertices that the fields place within ``CollisionSettings.reach`` of an inner
+layer (the
 caller's ``Inner.near``): most vertices are far from every inner layer and are never queried.
 """
 
@@ -34,13 +39,9 @@ from service.geometry.intersections import TriangleGrid
 from service.geometry.kept_queries import KeptQueries
 from service.geometry.mesh import vertex_normals
 from service.geometry.rings import dilate, vertex_neighbours
+from service.pipeline.collisions.settings import SETTINGS, CollisionSettings
 from service.pipeline.quality import PENETRATION_BAND
 from service.process.threads import pool
-
-REACH = PENETRATION_BAND + 0.01
-"""m: vertices whose field distance to an inner layer is below this are checked against its mesh: a
-vertex counts as inside an inner garment down to PENETRATION_BAND, and the fields are ~1-2 mm off near
-their surface and up to ~1 cm a few centimetres away from it (pants 3.5 cm inside a T-shirt read 4.5 cm)."""
 
 
 @dataclass
@@ -58,33 +59,11 @@ class Inner:
     kept: KeptQueries | None = None
     """Closest points on ``mesh`` already asked for (of these V vertices), or None: none yet."""
     reversed_faces: np.ndarray | None = None
-    """(F,) bool: faces of ``mesh`` that may face the body (``service.pipeline.collisions.squeeze.BodyAnchors.
+    """(F,) bool: faces of ``mesh`` that may face the body (``service.geometry.anchors.BodyAnchors.
     reversed_faces``: a fold's middle sheet, and at an armpit faces that lie the usual way); None: none."""
     sides: FoldSides | None = None
     """Its side test (``service.geometry.fold_side``) for the vertices closest to ``reversed_faces``, the
     one ``quality.penetration`` reads; None: those faces are turned over."""
-
-
-@dataclass(frozen=True)
-class RepairSettings:
-    margin: float = 0.002
-    """m: clearance every vertex keeps from the layers inside it."""
-    band: float = PENETRATION_BAND
-    """m: how deep inside an inner garment a vertex counts as having crossed it."""
-    ring: int = 2
-    rounds: int = 24
-    patience: int = 6
-    """Rounds without a new lowest count of faults (crossing pairs + vertices inside) before the loop
-    gives up; the result is then the round with the fewest (tight stacks of four tops oscillate)."""
-    growth: float = 1.5
-    """Factor on the margin of the vertices of triangles still crossing after a round."""
-    max_margin: float = 0.008
-    """m: the margin never grows beyond this (larger pushes around fingers made new crossings)."""
-    smoothing: int = 8
-    """Jacobi iterations of the displacement diffusion per round."""
-    lift: float = 0.012
-    """m: the largest move of a corner of a crossing triangle lifted clear of the inner triangle it
-    crosses in a round (``lifts``); 0: none, the corners are kicked along the layer's normal only."""
 
 
 @dataclass
@@ -101,7 +80,8 @@ class RepairResult:
     (``service.pipeline.collisions.passes`` presses the inner garment deeper there in its next pass)."""
 
 
-def _pushes(x: np.ndarray, inner: Inner, margin: np.ndarray, band: float, forced: np.ndarray, queries=None):
+def _pushes(x: np.ndarray, inner: Inner, margin: np.ndarray, forced: np.ndarray, queries=None,
+            short_of_margin: float = SETTINGS.short_of_margin):  # fmt: skip
     """The vertices of ``x (V, 3)`` that violate ``margin (V,)`` against ``inner``, where they go, and
     which of them are inside it: (indices (K,), targets (K, 3), inside (J,) indices). ``forced (V,)``
     marks vertices of crossing triangles: inside the inner layer they move out even where its covariant
@@ -116,13 +96,13 @@ def _pushes(x: np.ndarray, inner: Inner, margin: np.ndarray, band: float, forced
     inside = signed < 0
     # A vertex pushed to the margin last round lands a rounding error short of it: 10 % slack stops
     # the loop from pushing it again and again by nothing.
-    short = signed < 0.9 * margin[near]
+    short = signed < short_of_margin * margin[near]
     covered = inner.covered[near] | forced[near]
     # A vertex whose closest point is on the inner garment's rim is past its opening, not on either
     # side of it (a long sleeve leaving a T-shirt's sleeve; the learned h is blurred there): pushed
     # along the rim's face it went through the underarm. Only a crossing forces it.
     past = rim & ~forced[near]
-    bad = short & (inner.closed | (~past & (~inside | ((signed > -band) & covered))))
+    bad = short & (inner.closed | (~past & (~inside | ((signed > -PENETRATION_BAND) & covered))))
     idx = near[bad]
     # Out along the face normal from the closest point, to the margin.
     return idx, point[bad] + margin[idx, None] * normal[bad], near[bad & inside]
@@ -142,7 +122,7 @@ def _faces_around(mesh: ClosestPoint, points: np.ndarray, pad: float) -> np.ndar
 
 
 def repair_layer(
-    vertices: np.ndarray, faces: np.ndarray, inner: list[Inner], settings: RepairSettings = RepairSettings()
+    vertices: np.ndarray, faces: np.ndarray, inner: list[Inner], settings: CollisionSettings = SETTINGS
 ) -> RepairResult:
     """Repair one layer ``vertices (V, 3)``, ``faces (F, 3)`` against its final ``inner`` layers."""
     x = np.asarray(vertices, dtype=np.float64).copy()
@@ -159,7 +139,7 @@ def repair_layer(
     tested = [np.flatnonzero(layer.near[faces].any(axis=1)) for layer in inner]
 
     def grid(n: int, points: np.ndarray) -> tuple[TriangleGrid, np.ndarray]:
-        around = _faces_around(inner[n].mesh, points, settings.band)
+        around = _faces_around(inner[n].mesh, points, PENETRATION_BAND)
         return TriangleGrid.build(inner[n].mesh.vertices, inner[n].mesh.faces[around]), around
 
     def corners(n: int) -> np.ndarray:
@@ -187,7 +167,7 @@ def repair_layer(
         u = np.zeros_like(x)
         inside, inside_at = 0, []
         for layer, q in zip(inner, queries, strict=True):
-            idx, target, within = _pushes(x + u, layer, margin, settings.band, forced, q)
+            idx, target, within = _pushes(x + u, layer, margin, forced, q, settings.short_of_margin)
             u[idx] = target - x[idx]
             held[idx] = True
             inside += len(within)
@@ -198,9 +178,9 @@ def repair_layer(
         # Done when the current meshes cross nothing and no vertex is inside an inner layer: the margin
         # is a cushion, not a measure (a vertex squeezed between two inner layers closer than the margin
         # would otherwise be pushed back and forth until the round cap).
-        if (crossing == 0 and inside == 0) or rounds == settings.rounds:
+        if (crossing == 0 and inside == 0) or rounds == settings.repair_rounds:
             break
-        if rounds - best[4] >= settings.patience:  # the faults no longer fall: an oscillation
+        if rounds - best[4] >= settings.repair_patience:  # the faults no longer fall: an oscillation
             break
         rounds += 1
         # A crossing that survives its vertices' margins is an inner feature between them (fingers in a
@@ -220,8 +200,8 @@ def repair_layer(
             u[bulge] += kick[bulge, None] * vertex_normals(x, faces)[bulge]
             held |= bulge
         if held.any():
-            region = dilate(held, adjacency, settings.ring)
-            u = diffuse(u, held, region, adjacency, settings.smoothing)
+            region = dilate(held, adjacency, settings.repair_ring)
+            u = diffuse(u, held, region, adjacency, settings.repair_smoothing)
             x += u
         crossing, culprits = 0, []
         if built is None:
@@ -265,7 +245,7 @@ def lifts(
     tested_faces: list[np.ndarray],
     hits: list[np.ndarray],
     inner: list[tuple[Inner, np.ndarray]],
-    settings: RepairSettings,
+    settings: CollisionSettings,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Where the corners of crossing triangles go to clear the inner triangles they cross.
 

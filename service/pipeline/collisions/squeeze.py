@@ -42,6 +42,7 @@ from service.geometry.diffusion import diffuse
 from service.geometry.intersections import TriangleGrid, segment_crossings
 from service.geometry.kept_queries import KeptQueries
 from service.geometry.rings import dilate, vertex_neighbours
+from service.pipeline.collisions.settings import SETTINGS, CollisionSettings
 from service.pipeline.quality import PENETRATION_BAND
 
 
@@ -105,27 +106,6 @@ def beyond(x: np.ndarray, anchors: np.ndarray, outer: Outer, kept: KeptQueries) 
     return out
 
 
-@dataclass(frozen=True)
-class SqueezeSettings:
-    margin: float = 0.002
-    """m: how far inside the outer layer a squeezed vertex goes (the repair's margin)."""
-    band: float = PENETRATION_BAND
-    """m: a vertex farther outside the outer layer than this is not under it (the quality measure's
-    band: the outer garment's h is only meaningful near it)."""
-    ring: int = 3
-    smoothing: int = 12
-    rounds: int = 8
-    past_rim: bool = False
-    """A vertex whose closest point on the outer layer is on its rim is past its opening, not under it
-    (the repair's rule), unless the segment test finds it under: the fields, read where the fit left
-    the vertex, can still call it covered (a jacket's cloth 5 cm past a T-shirt's armhole was pulled
-    10 cm). Off by default: it is the second way ``service.pipeline.collisions.passes`` tries."""
-    relax: int = 4
-    """Jacobi iterations over the whole moved patch, pulled vertices included, after the diffusion:
-    neighbours pulled towards different sides of an armpit (torso and arm) otherwise part ways and
-    crumple the cloth between them; relaxed, the patch moves as one and the next round pulls again."""
-
-
 @dataclass
 class SqueezeResult:
     vertices: np.ndarray  # (V, 3)
@@ -133,18 +113,9 @@ class SqueezeResult:
     outside: int  # covered vertices still outside an outer layer (within band) at the end
 
 
-STALL_AFTER = 2
-"""Rounds after which a round that pulls no fewer vertices than the one before is the last but one
-(the rounds that used to be the whole squeeze: a garment worn in the usual order is done by then)."""
-USUAL_ROUNDS = 3
-"""Rounds when no layer asks the segment test (``Outer.looser_under``): every garment worn the usual
-way is done within them (``benchmarks.outfits``: all clean, as with 3 rounds before the test came),
-and the rounds past them took 1-8 % of a request (`benchmarks.latency --compare`, body + 1..4)."""
-STEPS = 4  # of the walk towards the body; a vertex still outside after them waits for the next round
-
-
-def _pulls(x: np.ndarray, outer: Outer, kept: KeptQueries, body: KeptQueries, floor: float, settings,
-           margin: np.ndarray, anchors: np.ndarray | None = None):  # fmt: skip
+def _pulls(x: np.ndarray, outer: Outer, kept: KeptQueries, body: KeptQueries, floor: float,
+           settings: CollisionSettings, margin: np.ndarray, anchors: np.ndarray | None = None,
+           past_rim: bool = False):  # fmt: skip
     """Vertices of ``x (V, 3)`` outside ``outer`` where it covers them (by less than ``margin (V,)``
     inside it), and their targets: (indices (K,), targets (K, 3)). ``kept`` and ``body`` keep the
     closest points on the outer layer and on the body of the vertices that did not move since the last
@@ -154,11 +125,11 @@ def _pulls(x: np.ndarray, outer: Outer, kept: KeptQueries, body: KeptQueries, fl
         return cand, np.zeros((0, 3))
     signed_out, rim = kept.signed_at(x, cand)
     far = outer.beyond[cand] if outer.beyond is not None else np.zeros(len(cand), dtype=bool)
-    under = signed_out < settings.band
-    if settings.past_rim:
+    under = signed_out < PENETRATION_BAND
+    if past_rim:
         under &= ~rim
     # 10 % slack, as in the repair: a vertex pulled to the margin lands a rounding error short of it.
-    bad = (signed_out > -0.9 * margin[cand]) & (under | far)
+    bad = (signed_out > -settings.short_of_margin * margin[cand]) & (under | far)
     idx = cand[bad]
     if not len(idx):
         return idx, np.zeros((0, 3))
@@ -181,20 +152,20 @@ def _pulls(x: np.ndarray, outer: Outer, kept: KeptQueries, body: KeptQueries, fl
     s = np.ones(len(idx))
     signed = signed_out[bad][keep]
     walking = np.arange(len(idx))
-    for _ in range(STEPS):
+    for _ in range(settings.squeeze_steps):
         s[walking] = np.maximum(low[walking], s[walking] - (signed + m[walking]) / span[walking])
         walking = walking[s[walking] > low[walking]]
         if not len(walking):
             break
         signed = outer.mesh.query(c[walking] + s[walking, None] * (p - c)[walking]).signed
-        keep = signed > -0.9 * m[walking]
+        keep = signed > -settings.short_of_margin * m[walking]
         walking, signed = walking[keep], signed[keep]
         if not len(walking):
             break
     # The straight way to an anchor can pass the body elsewhere (a sleeve's anchor on the arm seen from
     # under the armpit): back off halfway, up to three times, while the target is under the floor.
     back = np.flatnonzero(to_anchor & (s < 1))
-    for _ in range(3):
+    for _ in range(settings.squeeze_backoffs):
         if not len(back):
             break
         under = body.mesh.query(c[back] + s[back, None] * (p - c)[back]).signed < floor
@@ -210,15 +181,17 @@ def squeeze_layer(
     outer: list[Outer],
     body: ClosestPoint,
     floor: float,
-    settings: SqueezeSettings = SqueezeSettings(),
+    settings: CollisionSettings = SETTINGS,
     anchors: np.ndarray | None = None,
     margin: np.ndarray | None = None,
+    past_rim: bool = False,
 ) -> SqueezeResult:
     """Pull garment ``vertices (V, 3)``, ``faces (F, 3)`` towards the ``body`` mesh, inside the
     ``outer`` layers that cover it, but no closer to the body than ``floor`` (m). With ``anchors``
     (``(V, 3)``, ``BodyAnchors.on`` this body) vertices under an outer layer by the segment test are
     pulled too (``beyond``). ``margin (V,)``: how far inside the outer layers each vertex goes (m;
-    default ``settings.margin`` everywhere)."""
+    default ``settings.margin`` everywhere). ``past_rim``: a vertex whose closest point on an outer
+    layer is on its rim is past its opening, not under it (``Way.past_rim``)."""
     x0 = np.asarray(vertices, dtype=np.float64)
     margin = np.full(len(x0), settings.margin) if margin is None else np.asarray(margin, dtype=np.float64)
     x = x0.copy()
@@ -233,12 +206,14 @@ def squeeze_layer(
     adjacency = vertex_neighbours(np.asarray(faces), len(x))
     on_body = KeptQueries(body, len(x))
     outside, last, final = 0, None, False
-    rounds = settings.rounds if anchors is not None else min(settings.rounds, USUAL_ROUNDS)
+    rounds = settings.squeeze_rounds
+    if anchors is None:
+        rounds = min(rounds, settings.squeeze_usual_rounds)
     for round_ in range(rounds + 1):
         u = np.zeros_like(x)
         held = np.zeros(len(x), dtype=bool)
         for layer, queries in zip(outer, kept, strict=True):
-            idx, target = _pulls(x + u, layer, queries, on_body, floor, settings, margin, anchors)
+            idx, target = _pulls(x + u, layer, queries, on_body, floor, settings, margin, anchors, past_rim)
             u[idx] = target - x[idx]
             held[idx] = True
         outside = int(held.sum())
@@ -246,11 +221,11 @@ def squeeze_layer(
             break
         # A handful of vertices the walk cannot bring in (blocked at the floor) would keep every
         # round busy: once the count stops falling, one last round puts the pulled ones in place.
-        final = round_ == rounds - 1 or (round_ >= STALL_AFTER and outside >= last)
+        final = round_ == rounds - 1 or (round_ >= settings.squeeze_stall_after and outside >= last)
         last = outside
-        region = dilate(held, adjacency, settings.ring)
-        u = diffuse(u, held, region, adjacency, settings.smoothing)
+        region = dilate(held, adjacency, settings.squeeze_ring)
+        u = diffuse(u, held, region, adjacency, settings.squeeze_smoothing)
         if not final:  # the last round puts the pulled vertices where they belong
-            u = diffuse(u, np.zeros_like(held), region, adjacency, settings.relax)
+            u = diffuse(u, np.zeros_like(held), region, adjacency, settings.squeeze_relax)
         x += u
     return SqueezeResult(x, np.any(x != x0, axis=1), outside)
