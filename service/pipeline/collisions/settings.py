@@ -84,6 +84,11 @@ class CollisionSettings:
     more): garments draped on the body always pass, compression wear over another garment does not."""
     min_part: float = 0.03
     """m: body loops shorter than this (finger tips) are no part of anything a garment wraps."""
+    chest: float = 2 / 3
+    """How far from the crotch to the armpits (0 to 1) a garment's torso loops must reach to cover the
+    chest. On the mean body that is 40 cm above the crotch's level: the bundled bottoms' waistbands are at
+    27 cm, the tops' highest torso loops at 56-71 cm (the tank top's armholes lowest), a dress cut from
+    just under the arms at ~50 cm; a high-waisted skirt to 35 cm still counts as worn from the waist."""
 
     # --- let-down and gathering at junctions (``collisions.junctions``) ------------------------------
     rooms: tuple[float, ...] = (0.04, 0.06, 0.10)

@@ -8,7 +8,8 @@ imported garment of any category (``top``, ``bottom``, ``dress``) gets them too.
 ``GarmentTraits`` says where the garment is (its lowest and highest loops, the highest one around the
 torso) and what it does there: whether it goes around each leg separately (pants, shorts), around an
 arm alone (a sleeve cut long enough for a horizontal slice to close around it), covers the chest (its
-torso loops reach ``CHEST`` of the way from the crotch to the armpits: a top, a dress; not a bottom
+torso loops reach ``CollisionSettings.chest`` of the way from the crotch to the armpits: a top, a dress; not
+a bottom
 held at the waist) and hangs free below the hips (its hem goes around both legs in one loop: a skirt,
 a dress). The category decisions of the collision stages are expressed over these:
 
@@ -28,12 +29,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from service.pipeline.collisions.layering import BodySlices, GarmentProfile
-
-CHEST = 2 / 3
-"""How far from the crotch to the armpits (0 to 1) a garment's torso loops must reach to cover the
-chest. On the mean body that is 40 cm above the crotch's level: the bundled bottoms' waistbands are at
-27 cm, the tops' highest torso loops at 56-71 cm (the tank top's armholes lowest), a dress cut from
-just under the arms at ~50 cm; a high-waisted skirt to 35 cm still counts as worn from the waist."""
+from service.pipeline.collisions.settings import SETTINGS
 
 
 @dataclass(frozen=True)
@@ -58,8 +54,8 @@ class BodyLevels:
 
     @property
     def chest(self) -> float:
-        """m: the level a garment's torso loops must reach to cover the chest (``CHEST``)."""
-        return self.crotch + CHEST * (self.armpit - self.crotch)
+        """m: the level a garment's torso loops must reach to cover the chest (``SETTINGS.chest``)."""
+        return self.crotch + SETTINGS.chest * (self.armpit - self.crotch)
 
 
 @dataclass(frozen=True)
