@@ -2,7 +2,8 @@
 
     python -m training.imported_pictures --garments-dir DIR --id ID [--with tank_top] [--out docs/images]
 
-The outfits (the imported garment and ``--with`` bundled garments, inner to outer, untangled) on two
+The outfits (the imported garment and ``--with`` bundled garments, inner to outer, untangled: a garment
+worn from the waist down outermost, any other innermost, ``collisions.traits``) on two
 held-out bodies and two corners of the supported box are rendered by the page's own viewer in
 headless Chromium (``tests/js/glb_views.mjs``: needs node, ``tests/js/node_modules`` and chromium,
 as ``make test`` installs), front and back, into ``OUT/imported_<id>.png``.
@@ -18,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from service.pipeline.catalog import verified_imports
+from service.pipeline.collisions.traits import traits_of
 from service.pipeline.gltf import outfit_glb
 from service.pipeline.outfit import OutfitModels, make_outfit
 from service.pipeline.tryon import glb_layers
@@ -39,7 +41,9 @@ def main(argv=None) -> None:
     args = parser.parse_args(argv)
     models = OutfitModels.load(threads=2, imported=verified_imports(args.garments_dir)[0])
     ids = [g for g in args.others.split(",") if g]
-    ids = [*ids, args.id] if models.catalog[args.id].category == "bottom" else [args.id, *ids]
+    # Worn from the waist down: over the tops, tucked in; else (a top, a dress) under the others.
+    waist_down = not traits_of(models.layering_rule(), models.catalog[args.id]).covers_chest
+    ids = [*ids, args.id] if waist_down else [args.id, *ids]
     with tempfile.TemporaryDirectory() as tmp:
         files = []
         for i, beta in enumerate(BODIES):

@@ -34,6 +34,15 @@ class Garment:
 
     vertices: (V, 3) float64; faces: (F, 3) int64; openings: name -> (L,) int64 loop; display and
     material: how it looks (None: a flat colour, no UVs).
+
+    layer_rank: how near the body the garment is worn by default, over the whole catalog (every
+    category, imports included): lower is nearer. A stack whose ranks go up outwards is worn the usual
+    way (bundled: tank top 1 tucked into the bottoms 2, the T-shirt 3, long sleeve 4 and jacket 5 over
+    them); a garment over one of a lower rank is worn against it, and garments of equal rank have no
+    usual order between them (a bottom in another): either is against it, which
+    ``collisions.squeeze.asks_segment_test`` reads. Ranks only order: they need not be contiguous, and
+    nothing else is read from them (what a garment does, it holds the legs apart, it covers the chest,
+    comes from its geometry: ``collisions.traits``; ``category`` is the shop's label).
     """
 
     id: str
@@ -136,7 +145,7 @@ def _load_material(directory: Path, spec: dict | None) -> Material | None:
 
 @lru_cache(maxsize=16)
 def load_catalog(directory: Path | None = None, origin: Origin = "bundled") -> dict[str, Garment]:
-    """All garments by id, in catalog order (inner to outer default ranks)."""
+    """All garments by id, in the order of ``catalog.json`` (not by ``layer_rank``)."""
     directory = Path(directory) if directory is not None else models_dir() / "garments"
     index = json.loads((directory / "catalog.json").read_text())
     return {e["id"]: load_garment(directory, e, origin) for e in index["garments"]}

@@ -33,7 +33,10 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--id", required=True, help="catalog id: lower case letters, digits, _")
     p.add_argument("--name", required=True, help="name shown to shoppers")
     p.add_argument("--category", required=True, choices=("top", "bottom", "dress"))
-    p.add_argument("--layer-rank", type=int, default=3, help="default stacking rank (default: %(default)s)")
+    p.add_argument("--layer-rank", type=int, default=3,
+                   help="how near the body it is worn by default, over the whole catalog: lower is nearer "
+                   "(bundled: tank top 1, bottoms 2, T-shirt 3, long sleeve 4, jacket 5; "
+                   "default: %(default)s)")  # fmt: skip
     p.add_argument("--units", choices=("m", "cm", "mm"), default="m", help="(default: %(default)s)")
     p.add_argument("--models", type=Path, default=None,
                    help="garments directory to publish into (default: ULNEF_GARMENTS_DIR)")  # fmt: skip
