@@ -60,3 +60,17 @@ def test_retry_after_follows_measured_job_time():
     worker._pending = 4
     assert worker.retry_after() == 60  # capped
     worker.shutdown()
+
+
+def test_a_reserved_place_counts_until_its_job_ends_or_it_is_released():
+    worker = BoundedWorker(workers=1, queue_size=0, initial_job_s=0.01)
+    far = time.monotonic() + 60
+    worker.reserve(far)
+    with pytest.raises(Overloaded, match="^1 outfits in progress, at capacity$"):
+        worker.reserve(far)
+    worker.release()
+    worker.reserve(far)
+    assert worker.pending == 1
+    assert worker.submit(lambda: "reserved", far, reserved=True).result(5) == "reserved"
+    assert worker.pending == 0
+    worker.shutdown()
