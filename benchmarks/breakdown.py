@@ -56,13 +56,13 @@ KERNELS = (
     ("service.pipeline.canonical", "transfer_rows"),
     ("service.pipeline.strain", "_strain_kernel"),
     ("service.pipeline.strain", "_norms_kernel"),
-    ("service.pipeline.collisions.repair", "_clear_of_kernel"),
+    ("service.geometry.clear_of", "_clear_of_kernel"),
     ("service.geometry.intersections", "fill"),
     ("service.geometry.intersections", "pairs"),
     ("service.geometry.intersections", "corner_boxes"),
     ("service.geometry.sdf_grid", "_trilinear"),
     ("service.geometry.mesh", "_face_normals"),
-    ("service.geometry.closest", "_moved"),
+    ("service.geometry.kept_queries", "_moved"),
 )
 
 

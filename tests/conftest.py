@@ -11,6 +11,29 @@ import pytest
 from service.pipeline.catalog import Garment, load_catalog, save_garment
 
 
+@pytest.fixture(scope="session", autouse=True)
+def _compiled_kernels():
+    """Every numba kernel of ``service`` compiled into numba's on-disk cache before the first test
+    (``service.process.jit_cache.warm_kernels``: ~20-75 s with nothing cached, e.g. in CI or after a
+    kernel module changed; ~1 s when all is cached), so that no test's time includes a compile: the
+    first test to call a kernel only loads it. Not a test itself: where the outfit that compiles them
+    fails, the warning says so and the tests that call the failing code fail on their own."""
+    import time
+    import warnings
+
+    from service.process.jit_cache import warm_kernels
+
+    t0 = time.perf_counter()
+    try:
+        compiled = warm_kernels()
+    except Exception as error:  # noqa: BLE001 - reported, and the tests still run
+        warnings.warn(f"compiling the numba kernels before the tests failed: {error!r}", stacklevel=1)
+        return
+    if compiled:
+        seconds = time.perf_counter() - t0
+        print(f"\ncompiled {len(compiled)} numba kernels in {seconds:.0f} s before the tests")
+
+
 @pytest.fixture(autouse=True)
 def _fresh_catalog_cache():
     """``load_catalog`` is lru_cached by directory; a catalog read by one test must not leak into the next."""

@@ -17,7 +17,7 @@ import sys
 import tempfile
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -70,15 +70,22 @@ def run_node(script: str, *args: str, timeout: float = 300, env: dict | None = N
 class FakeEngine:
     """An ``Engine`` over a small catalog: the catalog's rest meshes on a dummy body, in
     ``delay`` seconds. A body taller than 200 cm is refused for gender above 0.5, as the real body
-    model refuses some heights for some genders."""
+    model refuses some heights for some genders.
+
+    ``release``: each outfit waits until the test sets this event (a worker busy for exactly as long
+    as the test wants, where a ``delay`` would race the machine's load); ``started`` is set when an
+    outfit begins (the test then knows the worker is busy)."""
 
     model_version = "fake"
 
     def __init__(
-        self, catalog: dict[str, Garment], delay: float = 0.0, nan: bool = False, crossings: int = 0
+        self, catalog: dict[str, Garment], delay: float = 0.0, nan: bool = False, crossings: int = 0,
+        release: threading.Event | None = None,
     ):
         self.catalog = catalog
         self.delay = delay
+        self.release = release
+        self.started = threading.Event()
         self.nan = nan
         self.crossings = crossings  # crossing pairs the fake repair leaves
         self.calls = 0
@@ -95,6 +102,9 @@ class FakeEngine:
     def make(self, spec: OutfitSpec) -> OutfitResult:
         with self._lock:
             self.calls += 1
+        self.started.set()
+        if self.release is not None:
+            assert self.release.wait(60), "the test never released the fake engine"
         time.sleep(self.delay)
         layers = [(g, self.catalog[g].vertices, self.catalog[g].faces) for g in spec.garments]
         if spec.include_body:
@@ -104,6 +114,19 @@ class FakeEngine:
                   "collision_free": self.crossings == 0, "crossing_pairs": self.crossings,
                   "seconds": {"body": 0.0, "total": self.delay}}  # fmt: skip
         return OutfitResult(outfit_glb(layers), report, layers)
+
+
+def wait_until(ready: Callable[[], bool], timeout: float, what: str | Callable[[], str],
+               interval: float = 0.05) -> None:  # fmt: skip
+    """Poll ``ready`` every ``interval`` s until it is true; fail the test after ``timeout`` s, saying
+    ``what`` did not happen (a callable: called then, e.g. for a log's tail). For conditions that no
+    event announces (another thread's or process's readiness); ``ready`` may itself fail the test
+    early (a process that exited)."""
+    deadline = time.monotonic() + timeout
+    while not ready():
+        if time.monotonic() > deadline:
+            pytest.fail(f"not within {timeout:g} s: {what() if callable(what) else what}")
+        time.sleep(interval)
 
 
 def free_port() -> int:
@@ -123,10 +146,11 @@ def live_server(app, limit_concurrency: int | None = None, ready_timeout: float 
     thread = threading.Thread(target=server.run, daemon=True)
     thread.start()
     try:
-        deadline = time.monotonic() + 30
-        while not server.started:
-            assert thread.is_alive() and time.monotonic() < deadline, "server did not start"
-            time.sleep(0.05)
+        def started() -> bool:
+            assert thread.is_alive(), "the server's thread ended before it started"
+            return server.started
+
+        wait_until(started, 30, "the server started")
         assert app.state.tryon.wait_loaded(ready_timeout), app.state.tryon.detail
         yield f"http://127.0.0.1:{port}"
     finally:
@@ -156,19 +180,20 @@ def serve_processes(count: int, env: dict[str, str] | None = None, ready_timeout
             procs.append((proc, f"http://127.0.0.1:{port}", log))
         deadline = time.monotonic() + ready_timeout
         for proc, url, log in procs:
-            while True:
+
+            def ready(proc=proc, url=url, log=log) -> bool:
                 if proc.poll() is not None:
                     tail = log.read_text()[-3000:]
                     pytest.fail(f"ulnef serve at {url} exited ({proc.returncode}):\n{tail}")
                 try:
-                    if httpx.get(f"{url}/readyz", timeout=5).status_code == 200:
-                        break
+                    return httpx.get(f"{url}/readyz", timeout=5).status_code == 200
                 except httpx.HTTPError:
-                    pass
-                if time.monotonic() > deadline:
-                    pytest.fail(f"ulnef serve at {url}: /readyz not 200 in {ready_timeout:g} s:\n"
-                                f"{log.read_text()[-3000:]}")  # fmt: skip
-                time.sleep(0.2)
+                    return False
+
+            def what(url=url, log=log) -> str:
+                return f"ulnef serve at {url}: /readyz 200:\n{log.read_text()[-3000:]}"
+
+            wait_until(ready, max(deadline - time.monotonic(), 0.0), what, interval=0.2)
         yield [url for _, url, _ in procs]
     finally:
         for proc, _, _ in procs:

@@ -83,7 +83,7 @@ def test_the_world_clock_times_the_collision_passes_and_is_removed_after(monkeyp
             raise ValueError("a failing call is timed too")
         return args
 
-    monkeypatch.setattr(service.pipeline.outfit, "untangle_world", stand_in)
+    monkeypatch.setattr(service.pipeline.outfit, "resolve", stand_in)
     WORLD["wall"] = WORLD["cpu"] = 0.0
     with _world_clock():
         assert service.pipeline.outfit.resolve is not stand_in  # wrapped

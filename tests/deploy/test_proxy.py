@@ -28,7 +28,7 @@ from pathlib import Path
 import httpx
 import pytest
 
-from tests.service_tools import free_port, require, serve_processes, stop_process_group
+from tests.service_tools import free_port, require, serve_processes, stop_process_group, wait_until
 
 REPO = Path(__file__).resolve().parents[2]
 NGINX = os.environ.get("NGINX") or shutil.which("nginx") or "/usr/sbin/nginx"
@@ -95,14 +95,14 @@ def running_nginx(
         proc = subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT, start_new_session=True)
     url = f"http://127.0.0.1:{port}"
     try:
-        deadline = time.monotonic() + 15
-        while True:
+        def answers() -> bool:
             assert proc.poll() is None, f"nginx exited ({proc.returncode}):\n{log.read_text()[-3000:]}"
             with contextlib.suppress(OSError):  # a bare connection: a request would take a round robin turn
                 socket.create_connection(("127.0.0.1", port), timeout=2).close()
-                break
-            assert time.monotonic() < deadline, f"nginx not answering:\n{log.read_text()[-3000:]}"
-            time.sleep(0.1)
+                return True
+            return False
+
+        wait_until(answers, 15, lambda: f"nginx answering:\n{log.read_text()[-3000:]}", interval=0.1)
         yield url
     finally:
         stop_process_group(proc)

@@ -64,3 +64,65 @@ def test_the_cli_seeds_the_cache_before_any_kernel_runs_though_numba_made_its_fo
         [sys.executable, "-c", probe], env=run_env, check=True, capture_output=True, text=True
     ).stdout
     assert "data loaded" in out and "data saved" not in out  # the seed's compiled kernel, not a new one
+
+
+def test_every_kernel_is_compiled_before_the_first_test():
+    """The session's ``_compiled_kernels`` (tests/conftest.py) left nothing for a test to compile."""
+    from service.process.jit_cache import kernels, uncached_kernels
+
+    assert {name.rsplit(".", 1)[0] for name in kernels()} >= {  # the kernel modules are found
+        "service.geometry.bvh_kernel", "service.geometry.mesh", "service.pipeline.lbfgs_kernel",
+    }
+    assert uncached_kernels() == []
+
+
+def test_an_empty_cache_has_every_kernel_uncached(tmp_path: Path):
+    import os
+    import subprocess
+    import sys
+
+    probe = (
+        "from service.process.jit_cache import kernels, uncached_kernels; "
+        "print(uncached_kernels() == sorted(kernels()))"
+    )
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path))
+    out = subprocess.run([sys.executable, "-c", probe], env=env, check=True, capture_output=True, text=True)
+    assert out.stdout.strip() == "True"
+
+
+def test_warm_kernels_compiles_in_a_child_process_only_what_the_cache_lacks(monkeypatch):
+    import subprocess
+    import sys
+
+    import service.process.jit_cache as jit_cache
+
+    runs = []
+    monkeypatch.setattr(subprocess, "run", lambda cmd, **kwargs: runs.append(cmd))
+    monkeypatch.setattr(jit_cache, "uncached_kernels", lambda: [])
+    assert jit_cache.warm_kernels() == [] and runs == []
+    monkeypatch.setattr(jit_cache, "uncached_kernels", lambda: ["service.geometry.mesh._face_normals"])
+    assert jit_cache.warm_kernels() == ["service.geometry.mesh._face_normals"]
+    assert runs == [[sys.executable, "-m", "service.process.jit_cache"]]
+
+
+def test_the_warm_outfit_calls_every_kernel():
+    """``compile_kernels`` (the outfit the images and the test session compile with) reaches every
+    kernel: a new kernel that it misses fails here, not as a compile inside some test's time."""
+    from numba.core.registry import CPUDispatcher
+
+    from service.process.jit_cache import compile_kernels, kernels
+
+    found = kernels()
+    inner, todo = set(), list(found.values())  # what compiled code calls (through inlined helpers too)
+    while todo:
+        func = todo.pop().py_func
+        for name in func.__code__.co_names:
+            callee = func.__globals__.get(name)
+            if isinstance(callee, CPUDispatcher) and id(callee) not in inner:
+                inner.add(id(callee))
+                todo.append(callee)
+    called_from_python = {name: kernel for name, kernel in found.items() if id(kernel) not in inner}
+    assert "service.geometry.bvh_kernel.build" in called_from_python
+    assert "service.geometry.bvh_kernel._partition" not in called_from_python  # build's helper
+    compile_kernels()
+    assert [name for name, kernel in called_from_python.items() if not kernel.signatures] == []
