@@ -23,6 +23,11 @@ log = logging.getLogger(__name__)
 UntanglerKind = Literal["neural", "reference"]
 # numpy's errors and what a failed solve raises; anything else is a bug and should surface.
 NUMERICAL_ERRORS = (ArithmeticError, np.linalg.LinAlgError, RuntimeError, ValueError)
+# Garment ids, one rule for the API (``service.server.schemas``) and the import
+# (``training.garment_import``): 32 characters, the API's limit since its first version.
+GARMENT_ID_MAX_CHARS = 32
+GARMENT_ID = rf"[a-z][a-z0-9_]{{0,{GARMENT_ID_MAX_CHARS - 1}}}"  # a regex, without anchors
+GARMENT_ID_RULE = f"1-{GARMENT_ID_MAX_CHARS} lower case letters, digits and _, starting with a letter"
 
 
 class InvalidField(ValueError):

@@ -15,13 +15,21 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException
 
-from service.pipeline.tryon import InvalidField
+from service.pipeline.tryon import GARMENT_ID_RULE, InvalidField
 from service.server import outfit_url
 from service.server.runtime import NotReady
 from service.server.schemas import ALLOWED
 from service.server.worker import DeadlineExceeded, Overloaded
 
 NOT_READY_RETRY_S = 5
+
+
+class HeaderInvalid(Exception):
+    """A request header the route cannot serve (``status`` 406 or 415), answered like any bad field."""
+
+    def __init__(self, status: int, field: str, message: str, allowed: str):
+        super().__init__(message)
+        self.status, self.field, self.allowed = status, field, allowed
 
 
 def _field_path(loc: tuple) -> str:
@@ -53,6 +61,9 @@ def field_errors(errors: list[dict], garment_ids: list[str]) -> list[dict]:
         elif kind == "json_invalid":
             message = f"malformed JSON ({e.get('ctx', {}).get('error', 'decode error')})"
             path = ""
+        elif kind == "string_pattern_mismatch" and path.startswith("garments"):
+            # a catalog id never breaks the id rule: say the id is unknown, and list the known ones
+            message = f"unknown garment id {e.get('input')!r} (ids are {GARMENT_ID_RULE})"
         else:
             message = outfit_url.message(e)
         allowed = _allowed(path, kind == "extra_forbidden")
@@ -91,6 +102,11 @@ def install(app: FastAPI, garment_ids: Callable[[], list[str]]) -> None:
     async def invalid_field(request: Request, exc: InvalidField) -> JSONResponse:
         errors = [{"field": exc.field, "message": str(exc), "allowed": exc.allowed}]
         return JSONResponse({"detail": _summary(errors), "errors": errors}, status_code=422)
+
+    @app.exception_handler(HeaderInvalid)
+    async def invalid_header(request: Request, exc: HeaderInvalid) -> JSONResponse:
+        errors = [{"field": exc.field, "message": str(exc), "allowed": exc.allowed}]
+        return JSONResponse({"detail": _summary(errors), "errors": errors}, status_code=exc.status)
 
     @app.exception_handler(NotReady)
     async def not_ready(request: Request, exc: NotReady) -> JSONResponse:

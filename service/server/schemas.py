@@ -15,9 +15,9 @@ from pydantic import BaseModel, ConfigDict, Field, StringConstraints, field_vali
 from service.pipeline.catalog import Category
 from service.pipeline.gltf import Compression
 from service.pipeline.outfit import MAX_GARMENTS
-from service.pipeline.tryon import OutfitSpec
+from service.pipeline.tryon import GARMENT_ID, OutfitSpec
 
-GarmentId = Annotated[str, StringConstraints(pattern=r"^[a-z][a-z0-9_]{0,31}$")]
+GarmentId = Annotated[str, StringConstraints(pattern=f"^{GARMENT_ID}$")]
 HEIGHT_CM = (135.0, 215.0)
 WEIGHT_KG = (25.0, 155.0)
 # What each request field accepts, quoted in every 4xx about it.

@@ -16,6 +16,7 @@ import pytest
 from service.cli import main as ulnef
 from service.pipeline.body import DEFAULT_BETA, BodyModel
 from service.pipeline.catalog import full_catalog, verified_imports
+from service.pipeline.tryon import GARMENT_ID_MAX_CHARS
 from service.process.manifest import verify_manifest
 from tests.garment_files import skirt_tube, welded, write_glb, write_obj, write_plain_obj
 from training.garment_import.__main__ import main as import_main
@@ -269,6 +270,21 @@ def test_bad_arguments_exit_2_with_a_message(args, message, tube, floor, tmp_pat
     err = _fails(tmp_path, capsys, tmp_path / path, *[a for a in rest if a not in ("--id", garment_id)],
                  garment_id=garment_id)  # fmt: skip
     assert message in err
+
+
+RULE = "use 1-32 lower case letters, digits and _, starting with a letter"
+
+
+@pytest.mark.parametrize("garment_id", ["a" * 33, "TShirt", "a" * GARMENT_ID_MAX_CHARS])
+def test_ids_follow_the_apis_rule(garment_id, tmp_path, capsys):
+    """One id rule for the import and the API (``service.pipeline.tryon.GARMENT_ID``): the longest id
+    the API takes passes (the missing file is what is refused), one character more does not
+    (tests/server/test_api_outfits.py: the API side)."""
+    err = _fails(tmp_path, capsys, tmp_path / "missing.obj", garment_id=garment_id)
+    if len(garment_id) > GARMENT_ID_MAX_CHARS or garment_id == "TShirt":
+        assert err == f"ulnef garments import: --id {garment_id!r}: {RULE}\n"
+    else:
+        assert "--id" not in err and "missing.obj" in err
 
 
 def test_no_garments_directory_is_refused(tmp_path, capsys, monkeypatch):

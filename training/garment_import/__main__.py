@@ -20,17 +20,18 @@ import sys
 from pathlib import Path
 
 from service.pipeline.catalog import load_catalog
+from service.pipeline.tryon import GARMENT_ID, GARMENT_ID_RULE
 from training.garment_import.pipeline import GarmentSpec, ImportSettings, import_garment
 from training.garment_import.read import GarmentFileError
 
-ID_PATTERN = re.compile(r"[a-z][a-z0-9_]{0,39}")
+ID_PATTERN = re.compile(GARMENT_ID)
 
 
 def parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="ulnef garments import", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)  # fmt: skip
     p.add_argument("file", type=Path, help="OBJ (+ MTL, textures) or glTF/GLB, draped on the avatar")
-    p.add_argument("--id", required=True, help="catalog id: lower case letters, digits, _")
+    p.add_argument("--id", required=True, help=f"catalog id: {GARMENT_ID_RULE}")
     p.add_argument("--name", required=True, help="name shown to shoppers")
     p.add_argument("--category", required=True, choices=("top", "bottom", "dress"))
     p.add_argument("--layer-rank", type=int, default=3,
@@ -80,7 +81,7 @@ def main(argv=None) -> int:
     if directory is None:
         return fail("no garments directory: pass --models DIR or set ULNEF_GARMENTS_DIR")
     if not ID_PATTERN.fullmatch(args.id):
-        return fail(f"--id {args.id!r}: use 1-40 lower case letters, digits and _, starting with a letter")
+        return fail(f"--id {args.id!r}: use {GARMENT_ID_RULE}")
     if args.id in load_catalog() or (directory / args.id).exists():
         return fail(f"--id {args.id!r} is already in the catalog: choose another id")
     if min(args.train_shapes, args.test_shapes, args.field_steps, args.workers) < 1:

@@ -8,7 +8,9 @@ from typing import Annotated
 
 from fastapi import APIRouter, Depends, Header, HTTPException, Path, Request, Response
 
+from service.pipeline.tryon import GARMENT_ID
 from service.server import outfit_url
+from service.server.errors import HeaderInvalid
 from service.server.routes.deps import TryOnDep, authorize
 from service.server.runtime import TryOn
 from service.server.schemas import ErrorResponse, OutfitCreated, OutfitRequest
@@ -71,7 +73,7 @@ def json_body(content_type: Annotated[str | None, Header()] = None) -> None:
     """415 for a body that is not JSON (FastAPI would read it as a string and complain about types)."""
     kind = (content_type or JSON).split(";")[0].strip().lower()
     if kind != JSON and not kind.endswith("+json"):
-        raise HTTPException(415, detail=f"Content-Type {kind!r}: the body must be {JSON}")
+        raise HeaderInvalid(415, "header.content-type", f"{kind!r} is not JSON", f"{JSON} (or a +json type)")
 
 
 def etag(outfit_id: str, compression: str) -> str:
@@ -112,7 +114,8 @@ async def create_outfit(
     is the GLB's URL on any replica (signed for the key, with API keys on)."""
     glb = wants_glb(accept)
     if glb is None:
-        raise HTTPException(406, detail=f"Accept: allowed {JSON} (default) or {GLB}")
+        raise HeaderInvalid(406, "header.accept", f"{accept!r} allows neither answer",
+                            f"{JSON} (default) or {GLB}")  # fmt: skip
     kid = authorize(tryon, authorization)
     compression = request.options.compression
     outfit_id, result, cached = await tryon.outfit(request.spec(), compression)
@@ -129,7 +132,7 @@ def _param(name: str, schema: dict, description: str, required: bool = False) ->
 
 # Parsed by ``outfit_url.parse_query`` (one model, the POST's), declared here for clients and fuzzers.
 QUERY_PARAMETERS = [
-    _param("garments", {"type": "string", "pattern": r"^[a-z][a-z0-9_]*(,[a-z][a-z0-9_]*)*$"},
+    _param("garments", {"type": "string", "pattern": f"^{GARMENT_ID}(,{GARMENT_ID})*$"},
            "Garment ids, inner to outer, comma-separated (the POST's `garments`).", required=True),
     _param("gender", {"type": "number", "minimum": 0, "maximum": 1}, "The POST's `body.gender`."),
     _param("height_cm", {"type": "number"}, "The POST's `body.height_cm`."),
