@@ -90,6 +90,17 @@ def compile_kernels(models_dir: Path | None = None) -> None:
     models = OutfitModels.load(models_dir)
     models.warm()
     make_outfit(models, list(garments), np.asarray(beta, dtype=np.float64))
+    # The service's faces are frozen (read-only) arrays; callers' own meshes (the tests', the training
+    # scripts') are writable, which numba compiles as another version of the geometry kernels.
+    from service.geometry.closest import ClosestPoint
+    from service.geometry.mesh import face_normals, vertex_normals
+
+    vertices = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]])
+    faces = np.array([[0, 1, 2], [0, 2, 3]], dtype=np.int64)
+    mesh = ClosestPoint.build(vertices, faces)
+    mesh.on_boundary(mesh.query(np.array([[0.2, 0.3, 0.1], [2.0, 0.5, 0.0]])))
+    vertex_normals(vertices, faces)
+    face_normals(vertices, faces)
 
 
 def warm_kernels(environ: Mapping[str, str] = os.environ) -> list[str]:
