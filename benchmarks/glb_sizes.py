@@ -113,7 +113,8 @@ def rows(models, garments=DEFAULT_OUTFIT, repeats: int = 5, meshopt_decode: Mesh
 
 def gzip_table(layers, repeats: int) -> None:
     """What gzip (HTTP compression, one core) costs and saves on each encoding, levels 1 and 6: why
-    the service sends GLBs as they are and leaves compression to a proxy (README, "HTTP caching")."""
+    the service sends GLBs as they are and leaves compression to a proxy (docs/operations.md, "Outfit ids,
+    GLB URLs and HTTP caching")."""
     print("\n## gzip of each encoding (median ms of one core)")
     print("| variant | bytes | level 1 bytes | level 1 ms | level 6 bytes | level 6 ms |")
     print("|---|---:|---:|---:|---:|---:|")

@@ -3,7 +3,7 @@
 Each ```sh block's curl commands (with their ``\\`` continuations and ``VAR=$(curl ...)`` lines) run
 in one bash, in order, so a later command can use what an earlier one returned. A command expects
 the status its ``# -> NNN`` comment names, and a 2xx without one. A block that sends
-``Bearer example-shop-key`` runs against a server with API keys on (README, "Access control").
+``Bearer example-shop-key`` runs against a server with API keys on (docs/operations.md, "Access control").
 """
 
 from __future__ import annotations

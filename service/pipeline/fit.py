@@ -49,7 +49,7 @@ OWN_H = -1.0  # h of the fitted garment at its own vertices: active (the body's 
 FAR_FIELD = 0.08
 """m: a layer whose surface is known to be at least this far from a vertex (``fit_garment``'s
 ``bounds``) is not asked its field there: it takes no part in the untangling (``FitSettings.reach``,
-3 cm), nor in the squeeze's and the repair's checks (6 cm, ``repair.REACH``). Its f there is the
+3 cm), nor in the squeeze's and the repair's checks (6 cm, ``CollisionSettings.reach``). Its f there is the
 bound, a lower bound on the distance, so that those stages, which ask ``|f| < t``, still look at
 every vertex within t of it; its h is ``INACTIVE`` (the learned one is wrong that far from the
 garment, ``far_layers``). On the latency benchmark's bodies the bounds put 59-62 % of the jacket's

@@ -122,7 +122,7 @@ def make_outfit(
     if repairs:
         # What a client checks: the returned meshes cross nothing and no vertex is left inside an inner
         # layer. False only for orders the repair could not make so (a jacket tucked into pants: its
-        # front hangs below the crotch; README, Outfits).
+        # front hangs below the crotch; docs/collisions.md).
         report["crossing_pairs"] = sum(r.crossing_pairs for r in repairs)
         report["collision_free"] = all(r.crossing_pairs == 0 and r.inside == 0 for r in repairs)
         report["repair"] = {

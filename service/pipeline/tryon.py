@@ -111,6 +111,11 @@ class Engine(Protocol):
 
     def make(self, spec: OutfitSpec) -> OutfitResult: ...
 
+    def body_ranges(self, gender: float, height_cm: float | None) -> dict:
+        """``{"height_cm": (lo, hi), "weight_kg": (lo, hi), "at_height_cm": h}``: what ``validate``
+        accepts for this gender, the weights at ``height_cm`` (clamped into the height range; its
+        middle when None). Bounds as refusals print them (``service.pipeline.body.printed_bounds``)."""
+
 
 def check_garment_ids(garments: tuple[str, ...], allowed: list[str], max_garments: int) -> None:
     """Raise ``InvalidField("garments", ...)`` unless 1..max_garments distinct ids from ``allowed``."""
@@ -129,7 +134,9 @@ class RefusedOrder(InvalidField):
     """A garment order no cloth can take (``service.pipeline.collisions.layering``): a 422 on ``garments``."""
 
 
-ORDER_RULE = "an order cloth can take (README, 'Layer orders'): swap the garments named, or drop one"
+ORDER_RULE = (
+    "an order cloth can take (docs/collisions.md, 'Refused orders'): swap the garments named, or drop one"
+)
 
 
 def check_order(refusals: list) -> None:
@@ -217,6 +224,15 @@ class ModelEngine:
         except ShapeOutOfRange as e:
             allowed = "a finite number" if e.allowed is None else format_range(*e.allowed)
             raise InvalidField(f"body.{e.field}", str(e), allowed) from None
+
+    def body_ranges(self, gender: float, height_cm: float | None) -> dict:
+        from service.pipeline.body import printed_bounds, supported_height_range_cm, supported_weight_range_kg
+
+        body = self.models.body
+        h_lo, h_hi = printed_bounds(*supported_height_range_cm(body, gender))
+        h = (h_lo + h_hi) / 2 if height_cm is None else min(max(height_cm, h_lo), h_hi)
+        weights = printed_bounds(*supported_weight_range_kg(body, gender, h))
+        return {"height_cm": (h_lo, h_hi), "weight_kg": weights, "at_height_cm": h}
 
     def make(self, spec: OutfitSpec) -> OutfitResult:
         from service.pipeline.gltf import outfit_glb

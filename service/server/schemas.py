@@ -40,6 +40,8 @@ ALLOWED = {
     "by POST /v1/outfits",
     "options.compression": "`none` (plain glTF), `quantized` (KHR_mesh_quantization) or `meshopt` "
     "(EXT_meshopt_compression)",
+    "query.gender": "a number from 0 (male) to 1 (female)",
+    "query.height_cm": f"a number from {HEIGHT_CM[0]:g} to {HEIGHT_CM[1]:g}",
 }
 CLOSED = ConfigDict(extra="forbid", strict=True)
 
@@ -98,8 +100,8 @@ class OutfitRequest(BaseModel):
         min_length=1,
         max_length=MAX_GARMENTS,
         description="Garment ids, inner to outer, each at most once. An order no cloth can take (pants "
-        "over a skirt) is refused with a 422 on `garments` that names the garments and why (README, "
-        "'Layer orders').",
+        "over a skirt) is refused with a 422 on `garments` that names the garments and why "
+        "(docs/collisions.md, 'Refused orders').",
     )
     body: BodyShape = Field(default_factory=BodyShape)
     options: OutfitOptions = Field(default_factory=OutfitOptions)
@@ -214,6 +216,31 @@ class ReloadResult(BaseModel):
 
 class GarmentList(BaseModel):
     garments: list[GarmentSummary] = Field(description="Every catalog garment, in catalog order.")
+
+
+class Range(BaseModel):
+    min: float = Field(description="Smallest accepted value.")
+    max: float = Field(description="Largest accepted value.")
+
+
+class BodyRanges(BaseModel):
+    model_config = ConfigDict(
+        json_schema_extra={
+            "example": {
+                "gender": 1.0,
+                "height_cm": {"min": 135.7, "max": 200.8},
+                "weight_kg": {"min": 40.9, "max": 76.7},
+                "weight_at_height_cm": 165.0,
+            }
+        }
+    )
+
+    gender: float = Field(description="The gender the ranges are for.")
+    height_cm: Range = Field(description="Heights accepted for this gender.")
+    weight_kg: Range = Field(description="Weights accepted at `weight_at_height_cm`.")
+    weight_at_height_cm: float = Field(
+        description="The height the weight range is for: the one asked, moved into the height range."
+    )
 
 
 class Health(BaseModel):

@@ -46,7 +46,7 @@ def test_tshirt_under_jacket_untangles(models, held_out_beta, untangler):
     assert pairs_before > 50 and pen_before > 0.001
     # ...the field fit moves most penetrating vertices out (it does not always lower the count of crossing
     # triangle pairs: the learned fields are mm off the meshes, and new small crossings appear where the
-    # vertices it moves meet the ones it keeps; README, Outfits)...
+    # vertices it moves meet the ones it keeps; docs/collisions.md)...
     assert pen_fit < 0.3 * pen_before, (r["penetration_before"], r["penetration_fit"])
     # ...and the exact repair meets the end-to-end issue's targets: no crossing, <= 0.1 % penetrating.
     assert pairs_after == 0, r["intersections_after"]

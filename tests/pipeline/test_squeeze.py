@@ -158,7 +158,7 @@ def test_with_past_rim_cloth_beyond_the_outer_layers_rim_is_not_pulled_under_it(
     past = np.abs(v[:, :2]).max(axis=1) > 0.1
     layer = [Outer(outer, every, every)]
     default = squeeze_layer(v, f, layer, body, plain.margin, plain)
-    rim = squeeze_layer(v, f, layer, body, plain.margin, replace(plain, past_rim=True))
+    rim = squeeze_layer(v, f, layer, body, plain.margin, plain, past_rim=True)
     assert default.moved[past].any()
     assert not rim.moved[past].any()
     # Under the outer layer both press the cloth to the margin.

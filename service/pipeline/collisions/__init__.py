@@ -6,9 +6,10 @@ Contract (``docs/collisions.md`` has it with pictures):
   explicit canonical meshes on the request's body, the body's world mesh, and the models' fields.
 - **Out**: per garment a world mesh ``(V_i, 3)`` with the garment's own faces, and its
   ``repair.RepairResult``: the crossing triangle pairs and the vertices inside an inner layer it left.
-- **Guarantee**: none beyond "the fewest faults found". The stages minimise the faults in the order
-  (crossing pairs, vertices inside) and return the best attempt; the report's ``collision_free`` is
-  true only when that attempt has none. What is tried, at most (the retry budget, in
+- **Guarantee**: none beyond "the fewest faults found". Each garment's repair keeps its round with the
+  fewest faults (crossing pairs plus vertices inside); the passes and the let-down attempts keep the
+  outfit with the fewest crossing pairs, then vertices inside, and return it; the report's
+  ``collision_free`` is true only when that outfit has none. What is tried, at most (the retry budget, in
   ``settings.CollisionSettings``): ``rooms`` (3) let-down rooms x ``ways`` (2) x ``passes`` (6) passes
   x ``repair_rounds`` (24) rounds per garment; an outfit that comes out clean stops at once, and the
   usual orders (nothing let down) are made with one room and one pass.

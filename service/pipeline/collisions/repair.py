@@ -160,8 +160,7 @@ def repair_layer(
     tested_at = np.full_like(x, np.nan)
     log = []
     crossing, rounds = -1, 0  # -1: not tested yet
-    # (crossing pairs + vertices inside, x, crossing, inside, round, the faults' places)
-    best = (np.inf, x.copy(), -1, -1, 0, [])
+    best = _Round(np.inf, x.copy(), -1, -1, 0, [])
     while True:
         held = np.zeros(len(x), dtype=bool)
         u = np.zeros_like(x)
@@ -172,15 +171,15 @@ def repair_layer(
             held[idx] = True
             inside += len(within)
             inside_at.append(within)
-        if crossing >= 0 and crossing + inside < best[0]:
+        if crossing >= 0 and crossing + inside < best.faults:
             places = [(h[:, 1].copy(), w) for h, w in zip(hits, inside_at, strict=True)]
-            best = (crossing + inside, x.copy(), crossing, inside, rounds, places)
+            best = _Round(crossing + inside, x.copy(), crossing, inside, rounds, places)
         # Done when the current meshes cross nothing and no vertex is inside an inner layer: the margin
         # is a cushion, not a measure (a vertex squeezed between two inner layers closer than the margin
         # would otherwise be pushed back and forth until the round cap).
         if (crossing == 0 and inside == 0) or rounds == settings.repair_rounds:
             break
-        if rounds - best[4] >= settings.repair_patience:  # the faults no longer fall: an oscillation
+        if rounds - best.round >= settings.repair_patience:  # the faults no longer fall: an oscillation
             break
         rounds += 1
         # A crossing that survives its vertices' margins is an inner feature between them (fingers in a
@@ -232,12 +231,26 @@ def repair_layer(
     if built is None:  # no round ran
         built = [p.result() for p in pending]
     places = [(h[:, 1].copy(), w) for h, w in zip(hits, inside_at, strict=True)]
-    if crossing + inside > best[0]:  # stopped while oscillating: return the round with the fewest faults
-        _, x, crossing, inside, _, places = best
+    if crossing + inside > best.faults:  # stopped while oscillating: return the round with the fewest faults
+        x, crossing, inside, places = best.vertices, best.crossing, best.inside, best.places
     moved = np.any(x != np.asarray(vertices, dtype=np.float64), axis=1)
     faults = [_fault_corners(layer.mesh, x, around, *where)
               for layer, (_, around), where in zip(inner, built, places, strict=True)]  # fmt: skip
     return RepairResult(x, moved, rounds, crossing, inside, log, faults)
+
+
+@dataclass(frozen=True)
+class _Round:
+    """The round of ``repair_layer`` with the fewest faults so far: their count (crossing pairs plus
+    vertices inside), the layer's vertices ``(V, 3)`` then, each count, the round, and per inner layer
+    where the faults were (its crossed faces, the inside vertices)."""
+
+    faults: float
+    vertices: np.ndarray
+    crossing: int
+    inside: int
+    round: int
+    places: list[tuple[np.ndarray, np.ndarray]]
 
 
 def lifts(
