@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -76,6 +77,33 @@ def cmd_garments(args: argparse.Namespace) -> int:
     return 0
 
 
+def outfit_input_problem(args: argparse.Namespace, catalog: dict | None) -> str | None:
+    """What is wrong with ``ulnef outfit``'s arguments, found before the models load (seconds), or None."""
+    from service.pipeline.body import BodyModel, ShapeOutOfRange, shape_from_measurements
+    from service.pipeline.outfit import MAX_GARMENTS
+    from service.pipeline.tryon import GARMENT_ID, GARMENT_ID_RULE
+
+    ids = [g for g in args.garments.split(",") if g]
+    if not 1 <= len(ids) <= MAX_GARMENTS:
+        return f"--garments: give 1-{MAX_GARMENTS} comma-separated garment ids (`ulnef garments` lists them)"
+    malformed = [g for g in ids if not re.fullmatch(GARMENT_ID, g)]
+    if malformed:
+        return f"--garments: {malformed[0]!r} is no garment id (ids are {GARMENT_ID_RULE})"
+    unknown = [g for g in ids if catalog is not None and g not in catalog]
+    if unknown:
+        return f"--garments: unknown id(s) {unknown}; allowed: {', '.join(catalog)}"
+    if len(set(ids)) != len(ids):
+        return f"--garments: each id at most once, got {ids}"
+    output = Path(args.output)
+    if not output.parent.is_dir():
+        return f"-o {output}: no such directory {output.parent}"
+    try:
+        shape_from_measurements(BodyModel.load(), args.gender, args.height_cm, args.weight_kg)
+    except ShapeOutOfRange as err:
+        return f"--{err.field.replace('_', '-')}: {err}"
+    return None
+
+
 def cmd_outfit(args: argparse.Namespace) -> int:
     """Dress a body, write the GLB, print the quality report as JSON."""
     from service.pipeline.body import ShapeOutOfRange, shape_from_measurements
@@ -84,6 +112,10 @@ def cmd_outfit(args: argparse.Namespace) -> int:
     from service.pipeline.outfit import OutfitModels, make_outfit
     from service.pipeline.tryon import glb_layers
 
+    problem = outfit_input_problem(args, try_load_catalog(Settings()))
+    if problem is not None:
+        print(f"ulnef outfit: {problem}", file=sys.stderr)
+        return 2
     models = OutfitModels.load(threads=args.threads, imported=verified_imports(Settings().garments_dir)[0])
     ids = [g for g in args.garments.split(",") if g]
     try:
@@ -93,7 +125,11 @@ def cmd_outfit(args: argparse.Namespace) -> int:
         print(f"ulnef outfit: {err}", file=sys.stderr)
         return 2
     body = None if args.no_body else (outfit.body_vertices, outfit.body_faces)
-    Path(args.output).write_bytes(outfit_glb(glb_layers(outfit.garments, models.catalog, body)))
+    try:
+        Path(args.output).write_bytes(outfit_glb(glb_layers(outfit.garments, models.catalog, body)))
+    except OSError as e:
+        print(f"ulnef outfit: cannot write {args.output}: {e.strerror}", file=sys.stderr)
+        return 2
     print(json.dumps(outfit.report, indent=2))
     return 0
 
@@ -140,6 +176,17 @@ def cmd_openapi(args: argparse.Namespace) -> int:
     return 0
 
 
+def positive_int(text: str) -> int:
+    """argparse type: a whole number of at least 1 (argparse's exit 2 names the option otherwise)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"{value} is less than 1")
+    return value
+
+
 def build_parser() -> argparse.ArgumentParser:
     defaults = Settings()
     parser = argparse.ArgumentParser(prog="ulnef", description="ULNeF virtual try-on service.")
@@ -164,7 +211,8 @@ def build_parser() -> argparse.ArgumentParser:
     outfit.add_argument("--untangler", choices=("neural", "reference"), default="neural")
     outfit.add_argument("--no-untangle", action="store_true", help="explicit meshes only (tangled)")
     outfit.add_argument("--no-body", action="store_true", help="leave the body out of the GLB")
-    outfit.add_argument("--threads", type=int, default=2, help="onnxruntime threads (default: %(default)s)")
+    outfit.add_argument("--threads", type=positive_int, default=2,
+                        help="onnxruntime threads (default: %(default)s)")  # fmt: skip
     outfit.add_argument("-o", "--output", default="outfit.glb", help="GLB path (default: %(default)s)")
     outfit.set_defaults(func=cmd_outfit)
 

@@ -67,3 +67,73 @@ def test_serve_runs_uvicorn_on_requested_address(monkeypatch: pytest.MonkeyPatch
     assert isinstance(app, FastAPI)
     assert kwargs == {"host": "0.0.0.0", "port": 9001, "log_level": "info", "log_config": None,
                       "limit_concurrency": 1000, "timeout_graceful_shutdown": 20}  # fmt: skip
+
+
+# ---------------------------------------------------------------- bad input: exit 2 and a message naming it
+
+
+@pytest.fixture
+def no_model_loading(monkeypatch: pytest.MonkeyPatch):
+    """Bad input is refused before the models load (seconds): loading them fails the test."""
+    from service.pipeline.outfit import OutfitModels
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("the models were loaded for input that could be refused without them")
+
+    monkeypatch.setattr(OutfitModels, "load", refuse)
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--garments", ","], "--garments: give 1-4 comma-separated garment ids (`ulnef garments` lists "
+         "them)"),
+        (["--garments", "TShirt"], "--garments: 'TShirt' is no garment id (ids are 1-32 lower case letters, "
+         "digits and _, starting with a letter)"),
+        (["--garments", "cape"], "--garments: unknown id(s) ['cape']; allowed: "),
+        (["--garments", "tshirt,tshirt"], "--garments: each id at most once, got ['tshirt', 'tshirt']"),
+        (["--garments", "tshirt", "-o", "/nonexistent-dir/x.glb"], "-o /nonexistent-dir/x.glb: no such "
+         "directory /nonexistent-dir"),
+        (["--garments", "tshirt", "--gender", "1", "--height-cm", "135.6"], "--height-cm: height_cm=135.6 is "
+         "outside the supported range 135.7-200.8 cm for gender=1"),
+        (["--garments", "tshirt", "--gender", "2"], "--gender: gender=2 is outside the supported range 0-1 "
+         "(0 male, 1 female)"),
+        (["--garments", "tshirt", "--weight-kg", "nan"], "--weight-kg: weight_kg=nan is not a finite number"),
+    ],
+)  # fmt: skip
+def test_outfit_bad_input_exits_2_naming_it(argv, message, no_model_loading, tmp_path, capsys):
+    assert main(["outfit", "-o", str(tmp_path / "o.glb"), *argv]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"ulnef outfit: {message}"), err
+    assert not (tmp_path / "o.glb").exists()
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["outfit", "--garments", "tshirt", "--threads", "0"], "argument --threads: 0 is less than 1"),
+        (["outfit", "--garments", "tshirt", "--height-cm", "tall"],
+         "argument --height-cm: invalid float value"),
+        (["outfit"], "the following arguments are required: --garments"),
+        (["avatar", "--units", "inch"], "argument --units: invalid choice: 'inch'"),
+        (["garments", "--csv"], "unrecognized arguments: --csv"),
+    ],
+)  # fmt: skip
+def test_argument_errors_exit_2_naming_the_option(argv, message, capsys):
+    with pytest.raises(SystemExit) as exited:
+        main(argv)
+    assert exited.value.code == 2
+    assert message in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ("name", "message"),
+    [("avatar.txt", "avatar.txt: the file must end in .glb or .obj"),
+     ("missing/avatar.obj", "cannot write")],
+)  # fmt: skip
+def test_avatar_bad_output_exits_2(name, message, tmp_path, capsys):
+    target = tmp_path / name
+    if name.startswith("missing"):
+        (tmp_path / "missing").write_text("a file where the directory should be")
+    assert main(["avatar", "-o", str(target)]) == 2
+    assert message in capsys.readouterr().err
