@@ -14,14 +14,14 @@ from service.pipeline.catalog import Garment, load_catalog, save_garment
 @pytest.fixture(scope="session", autouse=True)
 def _compiled_kernels():
     """Every numba kernel of ``service`` compiled into numba's on-disk cache before the first test
-    (``service.process.jit_cache.warm_kernels``: ~20-75 s with nothing cached, e.g. in CI or after a
+    (``service.pipeline.kernels.warm_kernels``: ~20-75 s with nothing cached, e.g. in CI or after a
     kernel module changed; ~1 s when all is cached), so that no test's time includes a compile: the
     first test to call a kernel only loads it. Not a test itself: where the outfit that compiles them
     fails, the warning says so and the tests that call the failing code fail on their own."""
     import time
     import warnings
 
-    from service.process.jit_cache import warm_kernels
+    from service.pipeline.kernels import warm_kernels
 
     t0 = time.perf_counter()
     try:

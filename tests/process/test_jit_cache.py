@@ -68,7 +68,7 @@ def test_the_cli_seeds_the_cache_before_any_kernel_runs_though_numba_made_its_fo
 
 def test_every_kernel_is_compiled_before_the_first_test():
     """The session's ``_compiled_kernels`` (tests/conftest.py) left nothing for a test to compile."""
-    from service.process.jit_cache import kernels, uncached_kernels
+    from service.pipeline.kernels import kernels, uncached_kernels
 
     assert {name.rsplit(".", 1)[0] for name in kernels()} >= {  # the kernel modules are found
         "service.geometry.bvh_kernel", "service.geometry.mesh", "service.pipeline.lbfgs_kernel",
@@ -82,7 +82,7 @@ def test_an_empty_cache_has_every_kernel_uncached(tmp_path: Path):
     import sys
 
     probe = (
-        "from service.process.jit_cache import kernels, uncached_kernels; "
+        "from service.pipeline.kernels import kernels, uncached_kernels; "
         "print(uncached_kernels() == sorted(kernels()))"
     )
     env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path))
@@ -94,7 +94,7 @@ def test_warm_kernels_compiles_in_a_child_process_only_what_the_cache_lacks(monk
     import subprocess
     import sys
 
-    import service.process.jit_cache as jit_cache
+    import service.pipeline.kernels as jit_cache
 
     runs = []
     monkeypatch.setattr(subprocess, "run", lambda cmd, **kwargs: runs.append(cmd))
@@ -102,7 +102,7 @@ def test_warm_kernels_compiles_in_a_child_process_only_what_the_cache_lacks(monk
     assert jit_cache.warm_kernels() == [] and runs == []
     monkeypatch.setattr(jit_cache, "uncached_kernels", lambda: ["service.geometry.mesh._face_normals"])
     assert jit_cache.warm_kernels() == ["service.geometry.mesh._face_normals"]
-    assert runs == [[sys.executable, "-m", "service.process.jit_cache"]]
+    assert runs == [[sys.executable, "-m", "service.pipeline.kernels"]]
 
 
 def test_the_warm_outfit_calls_every_kernel():
@@ -110,7 +110,7 @@ def test_the_warm_outfit_calls_every_kernel():
     kernel: a new kernel that it misses fails here, not as a compile inside some test's time."""
     from numba.core.registry import CPUDispatcher
 
-    from service.process.jit_cache import compile_kernels, kernels
+    from service.pipeline.kernels import compile_kernels, kernels
 
     found = kernels()
     inner, todo = set(), list(found.values())  # what compiled code calls (through inlined helpers too)
