@@ -1,6 +1,7 @@
 // Headless Chromium (playwright-core, Debian's chromium) on the try-on page:
 //   node page.mjs URL SCREENSHOT.png
-// picks a T-shirt and shorts, then for each GLB encoding of PAGE_COMPRESSIONS (default "none") picks
+// waits for the default outfit (its timings: summary.first), records the sliders' ranges for a man
+// and a woman and what a refused request leaves on screen, then picks a T-shirt and shorts, then for each GLB encoding of PAGE_COMPRESSIONS (default "none") picks
 // it, presses Dress, waits until the 3D view has loaded the returned GLB, saves a screenshot
 // (SCREENSHOT-<encoding>.png) and records the GLB it fetched; prints a JSON summary. Any request
 // leaving the server fails the run (the page must work offline), and so does any console error.
@@ -50,6 +51,40 @@ try {
   });
   await page.goto(url);
   await page.waitForSelector("body[data-ready=true]", { timeout: 30000 });
+  // The default outfit, shown without a click: where its time on screen goes.
+  await page.waitForSelector("body[data-first=done]", { timeout });
+  summary.first = await page.evaluate(() => ({
+    layers: [...document.querySelectorAll("#layers li")].map((li) => li.firstChild.textContent),
+    shown: document.body.dataset.shown || null,
+    status: document.querySelector("#status").textContent,
+    statusLog: window.statusLog,
+    timings: window.pageTimings,
+    resources: performance.getEntriesByType("resource").map((r) => ({
+      name: new URL(r.name).pathname, start: Math.round(r.startTime), end: Math.round(r.responseEnd),
+    })),
+  }));
+  // The sliders follow the gender's range, and a refusal leaves an empty view and its message.
+  const sliders = () => page.evaluate(() => Object.fromEntries(["height", "weight"].map((id) => {
+    const s = document.getElementById(id);
+    return [id, [Number(s.min), Number(s.max), Number(s.value)]];
+  })));
+  summary.ranges = { male: await sliders() };
+  await page.$eval("#gender", (s) => { s.value = "1"; s.dispatchEvent(new Event("change")); });
+  await page.waitForSelector("body[data-ranges^='1 ']", { timeout: 30000 });
+  summary.ranges.female = await sliders();
+  await page.$eval("#height", (s) => { s.max = "215"; s.value = "214"; }); // a stale range
+  await page.click("#dress");
+  await page.waitForSelector("#status.error", { timeout });
+  summary.refusal = await page.evaluate(() => ({
+    status: document.querySelector("#status").textContent,
+    src: document.querySelector("model-viewer").getAttribute("src"),
+    shown: document.body.dataset.shown || null,
+  }));
+  await page.$eval("#height", (s) => { s.value = "178"; });
+  await page.$eval("#weight", (s) => { s.value = "75"; });
+  await page.$eval("#gender", (s) => { s.value = "0"; s.dispatchEvent(new Event("change")); });
+  await page.waitForSelector("body[data-ranges^='0 ']", { timeout: 30000 });
+  for (const box of await page.$$("input[name=garment]:checked")) await box.uncheck();
   for (const id of garments) await page.check(`input[name=garment][value=${id}]`);
   if (!untangle) await page.uncheck("#untangle");
   summary.layers = await page.$$eval("#layers li", (items) => items.map((li) => li.firstChild.textContent));

@@ -12,6 +12,15 @@ from service.server.settings import Settings
 from tests.service_tools import FakeEngine
 
 
+class RangedFakeEngine(FakeEngine):
+    """The fake engine with the ranges its ``validate`` keeps (no body above 200 cm for gender > 0.5)."""
+
+    def body_ranges(self, gender: float, height_cm: float | None) -> dict:
+        heights = (140.0, 200.0 if gender > 0.5 else 210.0)
+        h = sum(heights) / 2 if height_cm is None else min(max(height_cm, heights[0]), heights[1])
+        return {"height_cm": heights, "weight_kg": (h - 120.0, h - 80.0), "at_height_cm": h}
+
+
 def make_app(
     models_dir: Path, delay: float = 0.0, crossings: int = 0, **overrides
 ) -> tuple[FastAPI, dict]:
@@ -21,7 +30,8 @@ def make_app(
     engine = {}
 
     def factory(settings: Settings) -> FakeEngine:
-        engine["it"] = FakeEngine(load_catalog(settings.catalog_dir()), delay=delay, crossings=crossings)
+        catalog = load_catalog(settings.catalog_dir())
+        engine["it"] = RangedFakeEngine(catalog, delay=delay, crossings=crossings)
         return engine["it"]
 
     app = create_app(Settings(**(values | overrides)), factory)

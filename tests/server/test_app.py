@@ -134,10 +134,16 @@ def test_cors_only_when_configured(fake_models_dir: Path):
 def test_page_and_its_scripts_are_served(client: TestClient):
     page = client.get("/")
     assert page.status_code == 200 and page.headers["content-type"].startswith("text/html")
-    for src in ("/static/vendor/model-viewer.min.js", "/static/page.js", "/static/page.css"):
+    for src in ("/static/vendor/model-viewer.min.js", "/static/page.js", "/static/page.css",
+                "/static/favicon.svg"):  # fmt: skip
         assert src in page.text
         assert client.get(src).status_code == 200
     assert "https://" not in page.text  # nothing from a CDN
+
+
+def test_favicon_ico_is_no_404(client: TestClient):
+    response = client.get("/favicon.ico")
+    assert response.status_code == 204 and response.content == b""
 
 
 # ---------------------------------------------------------------- model integrity

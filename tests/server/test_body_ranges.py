@@ -75,3 +75,35 @@ def test_printed_weight_bounds_are_accepted_and_one_step_beyond_refused(body, ge
 def test_printed_bounds_round_inwards(lo, hi, printed):
     assert printed_bounds(lo, hi) == printed
     assert lo <= printed[0] and printed[1] <= hi
+
+
+def test_the_ranges_endpoint_answers_what_the_engine_accepts(client):
+    response = client.get("/v1/body/ranges", params={"gender": 1, "height_cm": 212})
+    assert response.status_code == 200
+    assert response.json() == {
+        "gender": 1.0, "height_cm": {"min": 140.0, "max": 200.0}, "weight_kg": {"min": 80.0, "max": 120.0},
+        "weight_at_height_cm": 200.0,
+    }  # fmt: skip
+    middle = client.get("/v1/body/ranges").json()
+    assert middle["height_cm"] == {"min": 140.0, "max": 210.0} and middle["weight_at_height_cm"] == 175.0
+
+
+def test_the_ranges_endpoint_names_a_bad_parameter(client):
+    response = client.get("/v1/body/ranges", params={"gender": 2})
+    assert response.status_code == 422
+    error = {"field": "query.gender", "message": "Input should be less than or equal to 1",
+             "allowed": "a number from 0 (male) to 1 (female)"}  # fmt: skip
+    assert response.json() == {"detail": "query.gender: Input should be less than or equal to 1 (allowed: a "
+                               "number from 0 (male) to 1 (female))", "errors": [error]}  # fmt: skip
+
+
+def test_the_real_engines_ranges_are_accepted_at_their_bounds(body):
+    """ModelEngine.body_ranges over the committed body model: the printed bounds of the refusals."""
+    from service.pipeline.tryon import ModelEngine
+
+    engine = ModelEngine(type("Models", (), {"body": body})(), "test")
+    ranges = engine.body_ranges(1.0, 165.0)
+    assert ranges == {"height_cm": (135.7, 200.8), "weight_kg": (40.9, 76.7), "at_height_cm": 165.0}
+    assert engine.body_ranges(0.0, 300.0)["at_height_cm"] == 214.8
+    for weight in ranges["weight_kg"]:
+        assert refusal(body, 1.0, 165.0, weight) is None

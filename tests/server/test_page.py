@@ -47,7 +47,25 @@ def test_page_dresses_a_body_in_every_glb_encoding(tmp_path: Path):
         env = {"PAGE_TIMEOUT_MS": "500000", "PAGE_COMPRESSIONS": ",".join(COMPRESSIONS)}
         summary = json.loads(run_node("page.mjs", f"{base}/", str(shot), timeout=600, env=env))
     assert summary["outside"] == [], "the page must not load anything from outside the server"
-    assert summary["consoleErrors"] == []
+    first = summary["first"]  # the default outfit, shown with no click, a spinner while it is made
+    print("first outfit:", json.dumps({k: first[k] for k in ("timings", "resources", "status")}))
+    # Chromium logs the refused request below; nothing else
+    assert summary["consoleErrors"] == [
+        "Failed to load resource: the server responded with a status of 422 (Unprocessable Entity)"
+    ]
+    assert first["layers"] == ["Pants", "T-shirt"]
+    assert first["shown"].startswith("/v1/outfits.glb?garments=pants,tshirt&")
+    states = [state for state, _ in first["statusLog"]]  # then the view's load progress, in per cent
+    assert states == ["busy"] * (len(states) - 1) + [""] and len(states) >= 3
+    assert first["statusLog"][0][1] == "Dressing pants < tshirt…"
+    assert first["statusLog"][1][1] == "Loading the 3D view…"
+    # The sliders offer what the body model accepts (tests/server/test_body_ranges.py): heights for
+    # the gender, weights at the height (178 cm).
+    assert summary["ranges"]["male"] == {"height": [150, 214, 178], "weight": [58, 104, 75]}
+    assert summary["ranges"]["female"] == {"height": [136, 200, 178], "weight": [50, 89, 75]}
+    refusal = summary["refusal"]  # a request outside the range (a stale slider): message, empty view
+    assert refusal == {"status": "height_cm=214 is outside the supported range 135.7-200.8 cm for gender=1",
+                       "src": None, "shown": None}  # fmt: skip
     assert summary["layers"] == ["Shorts", "T-shirt"]
     assert [r["compression"] for r in summary["runs"]] == list(COMPRESSIONS)
     views = {}

@@ -44,6 +44,9 @@ class ExplicitOnly:
     def validate(self, spec: OutfitSpec) -> None:
         self.engine.validate(spec)
 
+    def body_ranges(self, gender: float, height_cm: float | None) -> dict:
+        return self.engine.body_ranges(gender, height_cm)
+
     def make(self, spec: OutfitSpec) -> OutfitResult:
         return self.engine.make(replace(spec, untangle=False, measure=False))
 

@@ -20,6 +20,12 @@ def page() -> FileResponse:
     return FileResponse(STATIC_DIR / "index.html", media_type="text/html")
 
 
+@router.get("/favicon.ico")
+def favicon() -> Response:
+    """No icon here (the page links ``/static/favicon.svg``): 204, not a 404 in every browser's log."""
+    return Response(status_code=204)
+
+
 def static_files() -> StaticFiles:
     return StaticFiles(directory=STATIC_DIR)
 

@@ -6,10 +6,22 @@ const $ = (id) => document.getElementById(id);
 const MESHOPT_DECODER = "/static/vendor/meshopt_decoder.js";
 customElements.whenDefined("model-viewer").then(() => {
   customElements.get("model-viewer").meshoptDecoderLocation = MESHOPT_DECODER;
+  mark("viewerDefined");
 });
+
+// Shown at first, so the view is never empty: the first of these present in the catalog.
+const DEFAULT_OUTFIT = ["pants", "tshirt"];
 
 const layers = []; // garment ids, inner to outer
 let catalog = [];
+let rangesAsked = 0; // the latest /v1/body/ranges request: older answers are dropped
+
+// Milliseconds since navigation of each step, for the page test (tests/js/page.mjs).
+window.pageTimings = {};
+function mark(name) {
+  window.pageTimings[name] = Math.round(performance.now());
+}
+mark("script");
 
 function renderLayers() {
   const list = $("layers");
@@ -51,13 +63,66 @@ function showValues() {
   $("weight-value").textContent = $("weight").value;
 }
 
-function status(text, error = false) {
+function setRange(slider, range) {
+  // Whole numbers inside the accepted range (the slider's step is 1), the value moved into it.
+  slider.min = Math.ceil(range.min);
+  slider.max = Math.floor(range.max);
+  slider.value = Math.min(Math.max(Number(slider.value), slider.min), slider.max);
+}
+
+// The sliders offer only what the service accepts: heights for the gender, weights at the height.
+async function followRanges() {
+  const asked = ++rangesAsked;
+  const query = new URLSearchParams({ gender: $("gender").value, height_cm: $("height").value });
+  const response = await fetch(`/v1/body/ranges?${query}`);
+  if (!response.ok || asked !== rangesAsked) return;
+  const ranges = await response.json();
+  setRange($("height"), ranges.height_cm);
+  // A height moved into its range (rounded to the slider's whole cm): the weights at that height.
+  if (ranges.weight_at_height_cm !== Number($("height").value)) return followRanges();
+  setRange($("weight"), ranges.weight_kg);
+  showValues();
+  document.body.dataset.ranges = `${$("gender").value} ${$("height").min}-${$("height").max} ` +
+                                 `${$("weight").min}-${$("weight").max}`;
+}
+
+const statusLog = (window.statusLog = []); // every status shown, for the page test
+function status(text, state = "") {
   $("status").textContent = text;
-  $("status").className = error ? "error" : "";
+  $("status").className = state; // "error", "busy" (a spinner) or ""
+  statusLog.push([state, text]);
+}
+
+function clearView() {
+  $("viewer").removeAttribute("src");
+  delete document.body.dataset.shown;
+}
+
+function showGlb(url) {
+  const viewer = $("viewer");
+  return new Promise((resolve) => {
+    const done = (event) => {
+      viewer.removeEventListener("load", done);
+      viewer.removeEventListener("error", done);
+      viewer.removeEventListener("progress", progress);
+      resolve(event.type);
+    };
+    const progress = (event) => {
+      const share = Math.round(100 * (event.detail?.totalProgress || 0));
+      if (share < 100) status(`Loading the 3D view… ${share}%`, "busy");
+    };
+    viewer.addEventListener("load", done);
+    viewer.addEventListener("error", done);
+    viewer.addEventListener("progress", progress);
+    viewer.src = url;
+  });
 }
 
 async function dress() {
-  if (!layers.length) return status("Pick at least one garment.", true);
+  if (!layers.length) {
+    clearView();
+    return status("Pick at least one garment.", "error");
+  }
   const request = {
     garments: layers,
     body: { gender: Number($("gender").value), height_cm: Number($("height").value),
@@ -65,22 +130,38 @@ async function dress() {
     options: { untangle: $("untangle").checked, include_body: $("include-body").checked,
                compression: $("compression").value },
   };
+  const names = layers.join(" < ");
   $("dress").disabled = true;
-  status("Dressing…");
+  status(`Dressing ${names}…`, "busy");
+  mark("dress");
   const t0 = performance.now();
   try {
     const response = await fetch("/v1/outfits", {
       method: "POST", headers: { "Content-Type": "application/json" }, body: JSON.stringify(request),
     });
     const answer = await response.json();
-    if (!response.ok) return status(answer.detail || `HTTP ${response.status}`, true);
-    const ms = Math.round(performance.now() - t0);
+    if (!response.ok) {
+      clearView(); // never the previous outfit under a refusal
+      const messages = (answer.errors || []).map((e) => e.message).join("\n");
+      return status(messages || answer.detail || `HTTP ${response.status}`, "error");
+    }
+    mark("answered");
+    const made = Math.round(performance.now() - t0);
+    status("Loading the 3D view…", "busy");
+    const event = await showGlb(answer.glb_url);
+    mark("shown");
+    if (event !== "load") {
+      clearView();
+      return status("The 3D view could not show the outfit.", "error");
+    }
+    document.body.dataset.shown = answer.glb_url;
+    const shown = Math.round(performance.now() - t0);
     const fallback = answer.report.numerical_fallback || [];
-    status(`${layers.join(" < ")}: ${ms} ms${answer.cached ? " (cached)" : ""}` +
+    status(`${names}: made in ${made} ms${answer.cached ? " (cached)" : ""}, on screen in ${shown} ms` +
            (fallback.length ? `\nnot fitted: ${fallback.join(", ")}` : ""));
-    $("viewer").src = answer.glb_url;
   } catch (err) {
-    status(`Request failed: ${err}`, true);
+    clearView();
+    status(`Request failed: ${err}`, "error");
   } finally {
     $("dress").disabled = false;
   }
@@ -88,11 +169,13 @@ async function dress() {
 
 async function main() {
   for (const id of ["gender", "height", "weight"]) $(id).addEventListener("input", showValues);
+  for (const id of ["gender", "height"]) $(id).addEventListener("change", followRanges);
   showValues();
   $("dress").onclick = dress;
   const response = await fetch("/v1/garments");
-  if (!response.ok) return status("Could not load the catalog.", true);
+  if (!response.ok) return status("Could not load the catalog.", "error");
   catalog = (await response.json()).garments;
+  mark("catalog");
   $("catalog").replaceChildren(...catalog.map((g) => {
     const label = document.createElement("label");
     const box = document.createElement("input");
@@ -103,7 +186,15 @@ async function main() {
     label.append(box, ` ${g.name}`);
     return label;
   }));
+  await followRanges();
   document.body.dataset.ready = "true";
+  const preset = DEFAULT_OUTFIT.filter((id) => catalog.some((g) => g.id === id));
+  for (const id of preset.length ? preset : catalog.slice(0, 1).map((g) => g.id)) {
+    document.querySelector(`input[name=garment][value=${id}]`).checked = true;
+    toggle(id, true);
+  }
+  await dress();
+  document.body.dataset.first = "done";
 }
 
 main();
