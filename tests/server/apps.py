@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import threading
 from pathlib import Path
 
 from fastapi import FastAPI
@@ -22,16 +23,18 @@ class RangedFakeEngine(FakeEngine):
 
 
 def make_app(
-    models_dir: Path, delay: float = 0.0, crossings: int = 0, **overrides
+    models_dir: Path, delay: float = 0.0, crossings: int = 0, release: threading.Event | None = None,
+    **overrides,
 ) -> tuple[FastAPI, dict]:
-    """The app over a fake engine with ``overrides`` of its settings; ``engine["it"]`` once started."""
+    """The app over a fake engine with ``overrides`` of its settings; ``engine["it"]`` once started.
+    ``release``: every outfit waits for this event (``FakeEngine``)."""
     values = dict(models_dir=models_dir, verify_models=False, configure_logging=False,
                   self_test_garments=[], self_test_untangle=False)  # fmt: skip
     engine = {}
 
     def factory(settings: Settings) -> FakeEngine:
         catalog = load_catalog(settings.catalog_dir())
-        engine["it"] = RangedFakeEngine(catalog, delay=delay, crossings=crossings)
+        engine["it"] = RangedFakeEngine(catalog, delay=delay, crossings=crossings, release=release)
         return engine["it"]
 
     app = create_app(Settings(**(values | overrides)), factory)

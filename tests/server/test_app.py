@@ -179,7 +179,10 @@ def test_start_refuses_a_changed_model_file(models_copy: Path):
 
 
 def test_start_accepts_intact_models(models_copy: Path):
-    _start(models_copy)
+    app = create_app(fake_settings(models_copy, verify_models=True), fake_factory)
+    with TestClient(app) as client:  # started: every file checked against the manifest
+        assert app.state.tryon.wait_loaded(10)
+        assert client.get("/readyz").status_code == 200
 
 
 def test_serve_command_refuses_damaged_models(models_copy: Path, monkeypatch, capsys):
