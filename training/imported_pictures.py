@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from service.pipeline.catalog import verified_imports
+from service.pipeline.collisions.layering import LayeringRule
 from service.pipeline.collisions.traits import traits_of
 from service.pipeline.gltf import outfit_glb
 from service.pipeline.outfit import OutfitModels, make_outfit
@@ -42,7 +43,8 @@ def main(argv=None) -> None:
     models = OutfitModels.load(threads=2, imported=verified_imports(args.garments_dir)[0])
     ids = [g for g in args.others.split(",") if g]
     # Worn from the waist down: over the tops, tucked in; else (a top, a dress) under the others.
-    waist_down = not traits_of(models.layering_rule(), models.catalog[args.id]).covers_chest
+    rule = LayeringRule(models.space.mean_vertices, models.space.faces)
+    waist_down = not traits_of(rule, models.catalog[args.id]).covers_chest
     ids = [*ids, args.id] if waist_down else [args.id, *ids]
     with tempfile.TemporaryDirectory() as tmp:
         files = []
