@@ -194,7 +194,11 @@ class GarmentSummary(BaseModel):
     id: str = Field(description="Garment id, as used in outfit requests.")
     name: str = Field(description="Human-readable name.")
     category: Category = Field(description="`top`, `bottom` or `dress`.")
-    layer_rank: int = Field(description="Default stacking rank in its category; lower is nearer the body.")
+    layer_rank: int = Field(
+        description="How near the body the garment is worn by default, over the whole catalog (every "
+        "category): lower is nearer. Garments worn in rising rank are in the usual order; equal ranks "
+        "have no usual order between them."
+    )
     vertices: int = Field(description="Vertex count of the rest mesh.")
     faces: int = Field(description="Triangle count of the rest mesh.")
     openings: list[str] = Field(description="Names of the garment's openings (boundary loops), sorted.")
