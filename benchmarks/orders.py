@@ -144,7 +144,7 @@ def pairs(models: OutfitModels, args) -> None:
 
 def let_down(models: OutfitModels, args) -> None:
     """The ordered pairs whose outer garment is let down around the inner one's junction
-    (``OutfitModels.lowering``), on ``--bodies`` held-out bodies and all four corners: the pairs whose
+    (``PairCaches.lowering``), on ``--bodies`` held-out bodies and all four corners: the pairs whose
     outcome depends most on the body."""
     betas = np.concatenate([sample_betas(args.bodies, BODY_SEED), corners()])
     chosen = [

@@ -155,14 +155,14 @@ def test_side_by_side_fits_equal_one_after_the_other(models, held_out_beta):
 def test_asking_ahead_gives_the_meshes_of_asking_when_needed(models, held_out_beta, monkeypatch, ids):
     # The squeeze and the repair ask some closest points ahead on a background thread: the answers
     # are functions of the points alone, so the outfit must be the one of asking each when needed.
-    import service.pipeline.collisions.passes as world_untangle
+    import service.pipeline.collisions.passes as passes
 
     asked = []
-    ahead = world_untangle.ask_ahead
-    monkeypatch.setattr(world_untangle, "ask_ahead", lambda *a: asked.append(1) or ahead(*a))
+    ahead = passes.ask_ahead
+    monkeypatch.setattr(passes, "ask_ahead", lambda *a: asked.append(1) or ahead(*a))
     with_ahead = make_outfit(models, ids, held_out_beta, measure=False)
     assert asked  # two or more layers apart: some were asked ahead
-    monkeypatch.setattr(world_untangle, "ASK_AHEAD", False)
+    monkeypatch.setattr(passes, "ASK_AHEAD", False)
     asked.clear()
     when_needed = make_outfit(models, ids, held_out_beta, measure=False)
     assert not asked

@@ -84,7 +84,7 @@ def test_the_traits_decide_every_bundled_pair_as_the_categories_did(catalog_rule
     traits = {g: traits_of(rule, garment) for g, garment in catalog.items()}
     for a, b in pairs:
         ga, gb = catalog[a], catalog[b]
-        # OutfitModels._junction: a top in a bottom is gathered up, never the bottom let down.
+        # PairCaches._junction: a top in a bottom is gathered up, never the bottom let down.
         assert tucked(traits[a], traits[b]) == (ga.category == "top" and gb.category == "bottom"), (a, b)
         assert worn_alike(traits[a], traits[b]) == (ga.category == gb.category), (a, b)
         old = _old_asks_segment_test(ga, gb, rule.holds_legs_apart)

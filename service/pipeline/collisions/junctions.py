@@ -20,10 +20,10 @@ on the two garments' drapes on the mean body (the explicit models at the default
 armhole hangs lower than its template's); the drop's depth from the same run on the body's explicit
 meshes, sliced near the drapes' run. It is measured on both sides of the body at once, so the drop is
 the deeper side's, applied to each saddle (the garments are near symmetric). Pure functions of the
-meshes: ``OutfitModels.lowering`` keeps the drapes' part per ordered pair, imported garments included.
+meshes: ``PairCaches.lowering`` keeps the drapes' part per ordered pair, imported garments included.
 
 A top tucked into a bottom whose crotch is above its hem is the exception: the top's hem is gathered
-up above the crotch instead (``raising``, ``OutfitModels.raising``), since it is hidden under the
+up above the crotch instead (``raising``, ``PairCaches.raising``), since it is hidden under the
 bottom and a bottom's dropped crotch shows. Its extent is made once per pair; the crotch height it
 ends at is read on each body.
 """
