@@ -43,6 +43,7 @@ pictures: $(VENV)/.installed-test
 	$(BIN)/python -m training.drape.pictures
 	$(BIN)/python -m training.fields.pictures
 	$(BIN)/python -m training.outfit_pictures
+	$(BIN)/python -m training.collision_pictures
 
 lint: $(VENV)/.installed-dev
 	$(BIN)/ruff check .
