@@ -133,7 +133,7 @@ def test_bad_urls_get_the_posts_messages(client, body, field, message, allowed):
         ("garments=tshirt&colour=red", "query.colour", "unknown field", ALLOWED["query"]),
         ("garments=tshirt&v=a&v=b", "query.v", "given more than once", "see openapi.yaml"),
         ("garments=tshirt&height_cm=170&height_cm=180", "query.height_cm", "given more than once",
-         "see openapi.yaml"),
+         ALLOWED["query.height_cm"]),
         ("garments=tshirt&gender=nan", "body.gender", "Input should be a finite number",
          ALLOWED["body.gender"]),
     ],

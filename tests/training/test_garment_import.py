@@ -55,6 +55,7 @@ def imported(tmp_path_factory, tube, floor) -> Path:
     return garments
 
 
+@pytest.mark.slow  # a tiny import end to end: a minute or two on two cores
 def test_a_tiny_import_publishes_a_verified_garment_and_nothing_else(imported: Path):
     assert sorted(p.name for p in imported.iterdir()) == ["wrap_skirt"]  # no staging left behind
     directory = imported / "wrap_skirt"
@@ -70,6 +71,7 @@ def test_a_tiny_import_publishes_a_verified_garment_and_nothing_else(imported: P
     assert garment.material.texture_files == {"base_color": "wrap_skirt.base.png"}
 
 
+@pytest.mark.slow  # a tiny import end to end: a minute or two on two cores
 def test_the_imported_garment_is_served_with_its_texture(imported: Path, tube, tmp_path: Path):
     from service.pipeline.tryon import ModelEngine, OutfitSpec
     from service.process.paths import models_dir
@@ -102,6 +104,7 @@ def test_the_imported_garment_is_served_with_its_texture(imported: Path, tube, t
     assert validate([path])[str(path)]["numErrors"] == 0
 
 
+@pytest.mark.slow  # a tiny import end to end: a minute or two on two cores
 def test_the_garments_endpoint_lists_imports_and_leaves_out_a_broken_one(imported: Path, tmp_path: Path):
     from fastapi.testclient import TestClient
 
@@ -293,6 +296,7 @@ def test_no_garments_directory_is_refused(tmp_path, capsys, monkeypatch):
     assert code == 2 and "--models DIR or set ULNEF_GARMENTS_DIR" in capsys.readouterr().err
 
 
+@pytest.mark.slow  # a tiny import end to end: a minute or two on two cores
 def test_two_imports_at_once_both_publish(tube, floor, tmp_path: Path):
     """Two imports into one garments directory at the same time, as the pods of a Job would run
     them: each publishes its own directory and manifest (nothing shared to merge but the catalog the
