@@ -44,6 +44,7 @@ pictures: $(VENV)/.installed-test
 	$(BIN)/python -m training.fields.pictures
 	$(BIN)/python -m training.outfit_pictures
 	$(BIN)/python -m training.collision_pictures
+	$(BIN)/python -m training.measurement_pictures
 
 lint: $(VENV)/.installed-dev
 	$(BIN)/ruff check .

@@ -7,10 +7,11 @@ the 5 mm grid ``z = k * STEP_M`` (absolute, so a level on the grid is found exac
 
 - ``waist_cm``, ISO 8559-1 *waist girth* at the *natural waistline*: the smallest torso girth
   between the top of the hip bones (the iliac crests) and the lowest ribs;
-- ``hip_cm``, ISO 8559-1 *hip girth*: the largest girth round the buttocks, between the crotch and
-  the natural waistline (on Anny bodies the girth there stays within 0.5 cm over 5-8 cm of height,
-  so the hip's height is loosely defined, a few cm below the buttocks' most prominent point, while
-  its girth is not);
+- ``hip_cm``, ISO 8559-1 *hip girth*: the girth at the buttocks' most prominent point, the height
+  between the crotch and the natural waistline where the torso's section reaches farthest back (+y:
+  the body faces -y). Not the largest girth there: on Anny bodies that stays within 0.5 cm over 5-8 cm
+  of height and its maximum landed a few cm below the buttocks, 1.5 cm above the crotch on the
+  default body, where a tape would not sit;
 - ``chest_cm``, ISO 8559-1 *chest girth* (men) or *bust girth* (women): the largest girth between the
   natural waistline and the armpits, i.e. across the shoulder blades and the chest's (the bust's)
   most prominent points, below where the arms join the torso;
@@ -177,7 +178,8 @@ def measure(vertices: np.ndarray, faces: np.ndarray, marks: Landmarks) -> BodyMe
         raise ValueError(f"no torso section at the iliac crests' height {iliac:.3f} m")
 
     waist = _pick(zs, girths, (zs >= iliac) & (zs <= ribs), largest=False, name="natural waist")
-    hip = _pick(zs, girths, zs <= zs[waist], largest=True, name="hip")
+    back = np.array([h[:, 1].max() if len(h) else np.nan for h in hulls])  # (L,) y of the rearmost point
+    hip = _pick(zs, back, zs <= zs[waist], largest=True, name="hip")
     # The armpits: the first height above the waist where the tape goes round an upper arm.
     chest_band = zs >= zs[waist]
     for arm in marks.arms:
