@@ -143,9 +143,33 @@ def test_built_bodies_have_the_asked_height_and_weight(body, subset, found):
     assert rows[-1] == ["nobody", "0"] + ["-"] * (len(pop.BUILD_HEADER) - 2)
 
 
-def test_the_benchmark_prints_its_four_tables(capsys):
+def test_the_benchmark_prints_its_five_tables(capsys):
     pop.main(["--sample", "1"])
     out = capsys.readouterr().out
     titles = [line for line in out.splitlines() if line.startswith("## ")]
-    assert len(titles) == 4 and titles[-1].startswith("## Built bodies (1 served")
-    assert sum(line.startswith("|---|") for line in out.splitlines()) == 4
+    assert len(titles) == 5 and titles[3].startswith("## Built bodies (1 served")
+    assert titles[-1].startswith("## Girths of the built bodies")
+    rules = [line for line in out.splitlines() if line.startswith("|---|")]
+    assert len(rules) == 5
+    # Every row has as many cells as its header: no "|" inside a cell.
+    for block in out.split("## ")[1:]:
+        table = [line for line in block.splitlines() if line.startswith("|")]
+        assert len({line.count("|") for line in table}) == 1, table[0]
+
+
+def test_girth_errors_are_the_tape_on_the_mesh_minus_nhanes():
+    from service.pipeline.measurements import landmarks, measure
+
+    body = BodyModel.load()
+    people = pop.load("female")
+    found = pop.outcomes(body, people.subset(np.arange(30)))
+    one = pop.sample_served(people.subset(np.arange(30)), found, 1)
+    (record,) = pop.build_sample(body, one)
+    vertices = body.vertices(shape_from_measurements(body, one.gender, one.height_cm[0], one.weight_kg[0]))
+    tape = measure(vertices, body.faces, landmarks(body))
+    assert record["hip_err_cm"] == tape.hip_cm - one.columns["BMXHIP"][0]
+    assert record["waist_iliac_err_cm"] == tape.waist_iliac_cm - one.columns["BMXWAIST"][0]
+    rows = pop.girth_rows({"female": [record], "nobody": []})
+    assert rows[0][:3] == ["female", "1", f"{record['hip_err_cm']:+.1f}"]
+    assert len(rows[0]) == len(pop.GIRTH_HEADER)
+    assert rows[1] == ["nobody", "0"] + ["-"] * (len(pop.GIRTH_HEADER) - 2)
