@@ -46,14 +46,7 @@ def skirt_tube(body: BodyModel, edge: float = 0.012, ease: tuple[float, float] =
         # theta 0 at the front (-y), +-pi at the back
         y = bones["spine03"][1] - b * np.cos(theta)
         rings.append(np.stack([a * np.sin(theta), y, np.full(n + 1, z)], 1))
-    vertices = np.concatenate(rings)
-    idx = np.arange(len(vertices)).reshape(len(zs), n + 1)
-    a, b, c, d = idx[:-1, :-1], idx[:-1, 1:], idx[1:, 1:], idx[1:, :-1]
-    # Outward normals: going round with theta and down the rings.
-    faces_out = np.concatenate([np.stack([a, d, c], -1), np.stack([a, c, b], -1)]).reshape(-1, 3)
-    u = np.tile(theta / (2 * np.pi) * circumference / 0.05, len(zs))
-    v = np.repeat((zs - zs[0]) / 0.05, n + 1)
-    return vertices, faces_out, np.stack([u, v], 1)
+    return _tube(rings, zs, theta, circumference)
 
 
 def dress_tube(body: BodyModel, edge: float = 0.012, ease: tuple[float, float] = (0.006, 0.07),
@@ -90,9 +83,18 @@ def dress_tube(body: BodyModel, edge: float = 0.012, ease: tuple[float, float] =
         radius = np.interp(theta, probe, r)
         xy = centre + radius[:, None] * np.stack([np.sin(theta), -np.cos(theta)], 1)
         rings.append(np.concatenate([xy, np.full((n + 1, 1), z)], 1))
+    return _tube(rings, zs, theta, circumference)
+
+
+def _tube(rings: list[np.ndarray], zs: np.ndarray, theta: np.ndarray, circumference: float):
+    """(vertices (Z * (n + 1), 3), faces, uv (V, 2)) of a tube of ``rings`` (Z of ``(n + 1, 3)``, the
+    last column repeating the first: the seam) at heights ``zs (Z,)`` and angles ``theta (n + 1,)``,
+    its UVs in 5 cm texture tiles."""
+    n = len(theta) - 1
     vertices = np.concatenate(rings)
     idx = np.arange(len(vertices)).reshape(len(zs), n + 1)
     a, b, c, d = idx[:-1, :-1], idx[:-1, 1:], idx[1:, 1:], idx[1:, :-1]
+    # Outward normals: going round with theta and down the rings.
     faces_out = np.concatenate([np.stack([a, d, c], -1), np.stack([a, c, b], -1)]).reshape(-1, 3)
     u = np.tile(theta / (2 * np.pi) * circumference / 0.05, len(zs))
     v = np.repeat((zs - zs[0]) / 0.05, n + 1)

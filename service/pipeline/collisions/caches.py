@@ -113,9 +113,9 @@ class PairCaches:
         with self._lock:  # two requests' threads may ask for the same pair at once
             if key not in self._junctions:
                 inner, outer = (self._drape(g) for g in key)
-                body = self.layering_rule().body
-                a, b = self.catalog[inner_id], self.catalog[outer_id]
                 rule = self.layering_rule()
+                body = rule.body
+                a, b = self.catalog[inner_id], self.catalog[outer_id]
                 up = None
                 if tucked(traits_of(rule, a), traits_of(rule, b)):  # a top in a bottom
                     up = junctions.raising(inner.profile, outer.profile, body, inner.vertices, a.faces,

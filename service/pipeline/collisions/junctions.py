@@ -6,14 +6,13 @@ arm and torso), the crotch of pants. Where the inner garment's junction hangs be
 (a jacket's deep armhole under a T-shirt: 15 cm on the mean body's drapes; a long sleeve under a tank
 top; shorts under pants), the inner cloth between the parts lies outside the outer garment over that
 height, and no push towards the body or along a normal takes it in: the outer garment has to come
-down around it. ``lowering`` moves the outer garment's cloth at its junction down, below the inner
-one's, in canonical space, as a smooth bump: full at the outer junction's saddle point, fading over
+down around it. ``lowering`` moves the outer garment's cloth at its junction down, below the inner one's,
+in canonical space, as a smooth bump: full at the outer junction's saddle point, fading over
 ``CollisionSettings.bump_radius`` times the drop, and fading out over ``gate`` above the saddle (the
-shoulders and the
-waistband stay where they are). How far is read on the body the garments are worn on (``body_run``:
-their explicit meshes there, which hang lower or higher on it than on the mean body). The stretch that
-adds is the outer garment's, as cloth pulled over a bulkier one stretches; ``benchmarks.orders``
-reports it.
+shoulders and the waistband stay where they are). How far is read on the body the garments are worn on
+(``body_run``: their explicit meshes there, which hang lower or higher on it than on the mean body). The
+stretch that adds is the outer garment's, as cloth pulled over a bulkier one stretches;
+``benchmarks.orders`` reports it.
 
 Which pairs are let down, and where the bump sits, come from ``collisions.layering.junction_run``
 on the two garments' drapes on the mean body (the explicit models at the default shape: a drape's

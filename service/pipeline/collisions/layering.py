@@ -1,10 +1,9 @@
 """Which garment orders cloth can take, decided from the garments before the pipeline runs (issue 21).
 
-Everything is read off horizontal slices (every ``CollisionSettings.slice_step``, Z up) of the rest meshes on
-the mean body
-(catalog templates, bundled or imported: the same for every body shape, since each garment is
-graded to the body it is worn on). At each level the body's cross-section is a set of closed loops:
-the body *parts* there (torso, arms, legs). A garment's closed loop at that level *wraps* the parts
+Everything is read off horizontal slices (every ``CollisionSettings.slice_step``, Z up) of the rest meshes
+on the mean body (catalog templates, bundled or imported: the same for every body shape, since each
+garment is graded to the body it is worn on). At each level the body's cross-section is a set of closed
+loops: the body *parts* there (torso, arms, legs). A garment's closed loop at that level *wraps* the parts
 whose centres it encloses. Two rules:
 
 1. **Topology.** Where the inner garment wraps parts in one loop (a skirt around both legs) that the

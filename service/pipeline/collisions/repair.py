@@ -20,9 +20,9 @@ fewest faults (crossing pairs, then vertices inside), stops after ``repair_round
    and, in the next round, their corners are lifted along the inner surface's normal clear of the
    inner triangles they cross (``lifts``), and the loop repeats.
 
-Everything is local to the vertices that the fields place within ``CollisionSettings.reach`` of an inner
-layer (the
-caller's ``Inner.near``): most vertices are far from every inner layer and are never queried.
+Everything is local to the vertices that the fields place within ``CollisionSettings.reach`` of an
+inner layer (the caller's ``Inner.near``): most vertices are far from every inner layer and are never
+queried.
 """
 
 from __future__ import annotations

@@ -9,8 +9,9 @@ operator splits a violation between both layers too, but the fit moves a vertex 
 (1 cm) in canonical space.
 
 So, from the outermost garment inwards, every vertex of a garment that an outer garment covers (its
-covariant field h < 0 at the vertex) and that lies outside that outer mesh, by less than ``band``,
-moves straight towards its closest body point until it is ``margin`` inside the outer mesh (a walk in
+covariant field h < 0 at the vertex) and that lies outside that outer mesh, by less than ``PENETRATION_BAND``,
+moves straight towards its closest body point until it is ``CollisionSettings.margin`` inside the outer mesh
+(a walk in
 steps of its signed distance), never closer to the body than ``floor``: the caller keeps one margin
 per garment under it, so that a stack of squeezed layers does not collapse onto the skin, where the
 repair would have to lift them apart again.
@@ -18,7 +19,7 @@ repair would have to lift them apart again.
 Towards the closest body point, not along the outer layer's normal: in a concave crease of the outer
 layer (pants under a belly) the normal of the nearest face points through the other side of the
 crease, and 118 of 768 crossings were left that way; along the garment's own normal the tucked
-T-shirt kept 17 crossings. The displacement spreads over ``ring`` rings (the diffusion of the
+T-shirt kept 17 crossings. The displacement spreads over ``squeeze_ring`` rings (the diffusion of the
 repair), so the garment folds in along the outer layer's edge instead of tearing there. The repair
 then pushes whatever the squeeze put inside the body or an inner garment back out, and the outer
 layers over it.
@@ -43,6 +44,7 @@ from service.geometry.intersections import TriangleGrid, segment_crossings
 from service.geometry.kept_queries import KeptQueries
 from service.geometry.rings import dilate, vertex_neighbours
 from service.pipeline.collisions.settings import SETTINGS, CollisionSettings
+from service.pipeline.collisions.traits import tucked, worn_alike
 from service.pipeline.quality import PENETRATION_BAND
 
 
@@ -76,8 +78,6 @@ def asks_segment_test(inner, outer, traits) -> bool:
     --pairs`` with tucked tops asked too: the long sleeve in pants on the shortest, lightest man 105 -> 6
     crossing pairs, in shorts 24 -> 0. ``traits(garment) -> GarmentTraits`` (``traits.traits_of``) is
     asked only against the usual order: usual orders never read the garments' slices."""
-    from service.pipeline.collisions.traits import tucked, worn_alike
-
     if inner.layer_rank < outer.layer_rank:
         return False
     a, b = traits(inner), traits(outer)
@@ -91,7 +91,8 @@ def beyond(x: np.ndarray, anchors: np.ndarray, outer: Outer, kept: KeptQueries) 
     (``kept``: closest points on it, which the squeeze's first round then reuses). Covered vertices
     already under the outer layer, nearly all of a garment worn in the usual order, are not asked.
 
-    Not only the vertices ``outer.near`` (the fields' distance within ``REACH``): a jacket's sleeve
+    Not only the vertices ``outer.near`` (the fields' distance within ``CollisionSettings.reach``): a
+    jacket's sleeve
     hangs up to 7 cm below a long sleeve's along the forearm, where the fields (read at the mesh before
     the long sleeve was let down) put it farther, and nothing pulled it in: 29-412 crossing pairs on
     ``benchmarks.orders --pairs``' three bodies, 0 with every vertex asked. The caller adds those

@@ -6,12 +6,11 @@ its crotch and its armpits. Pure functions of the slices the layering rule makes
 imported garment of any category (``top``, ``bottom``, ``dress``) gets them too.
 
 ``GarmentTraits`` says where the garment is (its lowest and highest loops, the highest one around the
-torso) and what it does there: whether it goes around each leg separately (pants, shorts), around an
-arm alone (a sleeve cut long enough for a horizontal slice to close around it), covers the chest (its
-torso loops reach ``CollisionSettings.chest`` of the way from the crotch to the armpits: a top, a dress; not
-a bottom
-held at the waist) and hangs free below the hips (its hem goes around both legs in one loop: a skirt,
-a dress). The category decisions of the collision stages are expressed over these:
+torso) and what it does there: whether it goes around each leg separately (pants, shorts), around an arm
+alone (a sleeve cut long enough for a horizontal slice to close around it), covers the chest (its torso
+loops reach ``CollisionSettings.chest`` of the way from the crotch to the armpits: a top, a dress; not a
+bottom held at the waist) and hangs free below the hips (its hem goes around both legs in one loop: a
+skirt, a dress). The category decisions of the collision stages are expressed over these:
 
 - ``tucked``: a garment worn on the chest inside one worn from the waist down around the legs, whose
   hem is gathered up above the outer one's crotch (``junctions.raising``), never the outer one let
