@@ -1,22 +1,26 @@
-"""Real bodies: how many measured US adults (NHANES 2017-March 2020) today's service serves, and how well.
+"""Real bodies: how the service serves measured US adults (NHANES 2017-March 2020) from their height,
+weight and hip girth, and how well (issue 55).
 
-Run (~5 s on two cores)::
+Run (the held-out sets, ~5 min on two cores the first time; ``--all`` every adult, ~25 min; results
+are kept under ``build/population/`` and a rerun of the same models and code reads them)::
 
-    python -m benchmarks.population [--sample N]
+    python -m benchmarks.population [--all] [--outfits N]
 
 Data: ``benchmarks/data/nhanes/`` (public domain, source in its README.md), one CSV per sex with the
-columns of ``COLUMNS``. Each person is asked for as the API would be: gender 0 (men) or 1 (women), their
-standing height (cm) and weight (kg), through ``shape_from_measurements``; a refusal is sorted by the
-field the ``ShapeOutOfRange`` names (height, or weight below or above the range at that height).
+columns of ``COLUMNS``. Each person asks as the API would: gender 0 (men) or 1 (women), their
+standing height (cm), weight (kg) and hip girth (cm), through the service's ``BodyBuilder``; a refusal
+is sorted by the field the ``ShapeOutOfRange`` names. A served adult's given measurements are measured
+again on the built mesh (``service.pipeline.measurements``); the held-out adults are also built from
+height and weight alone, and their body's hip (predicted) and NHANES waist at the iliac crest (never
+given) are compared with the real ones. ``--outfits N`` dresses N held-out adults of each tail (the
+heaviest over BMI 40, the shortest, the tallest) and reports clean outfits and times.
 
 Fitting and held-out sets. ``held_out`` puts a row in the held-out set when the first 8 bytes of
 sha256("<sex>/<row>") (sex ``female`` or ``male``, row the 0-based data row of that sex's CSV), read as
 a big-endian integer over 2^64, are below ``HELD_OUT_SHARE`` (0.2): a fixed ~80/20 split that does not
 depend on numpy, on the order rows are read in, or on any other row. Code that fits anything to these
-bodies (issue 55) fits on the fitting set only and reports on the held-out set.
-
-One function computes each table's rows (``*_rows``); ``print_table`` prints them. A later column
-(girth errors, clean outfits, latency) is a new key in ``build_sample``'s records or a new ``*_rows``.
+bodies (the girth priors, ``training.body_priors``) fits on the fitting set only and is reported on
+the held-out set.
 """
 
 from __future__ import annotations
@@ -24,14 +28,19 @@ from __future__ import annotations
 import argparse
 import csv
 import hashlib
+import json
 import time
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
+from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
 
-from service.pipeline.body import BodyModel, ShapeOutOfRange, body_measurements, shape_from_measurements
-from service.pipeline.measurements import landmarks, measure
+from service.pipeline.body import BodyModel, ShapeOutOfRange
+from service.pipeline.body_build import BodyBuilder, BodyRequest
+from service.pipeline.girth_priors import GirthPriors
+from service.process.paths import REPO_ROOT, models_dir
 
 DATA_DIR = Path(__file__).resolve().parent / "data" / "nhanes"
 FILES = {"female": "nhanes_adult_female_bmx_2020.csv", "male": "nhanes_adult_male_bmx_2020.csv"}
@@ -44,9 +53,19 @@ HELD_OUT_SHARE = 0.2
 BMI_EDGES = (18.5, 25.0, 30.0, 35.0, 40.0, 50.0)
 HEIGHT_EDGES_CM = (150.0, 160.0, 170.0, 180.0, 190.0)
 # What happened to a request: served, or the reason it was refused.
-OUTCOMES = ("served", "height", "too light", "too heavy")
-DEFAULT_SAMPLE = 40
+OUTCOMES = ("served", "height", "too light", "too heavy", "girths")
 SAMPLE_SEED = 0
+CACHE_DIR = REPO_ROOT / "build" / "population"
+CHUNK = 25  # adults per job of a worker process (and per cache write)
+CACHE_INPUTS = (
+    models_dir() / "body" / "anny_shape.npz",
+    models_dir() / "body" / "girth_priors.json",
+    *(
+        REPO_ROOT / "service" / "pipeline" / f
+        for f in ("body.py", "body_fit.py", "body_build.py", "measurements.py")
+    ),  # fmt: skip
+    REPO_ROOT / "service" / "geometry" / "girth.py",
+)
 
 
 @dataclass(frozen=True)
@@ -96,19 +115,21 @@ def load_all(data_dir: Path = DATA_DIR) -> dict[str, Population]:
     return {sex: load(sex, data_dir) for sex in SEXES}
 
 
-def held_out(sex: str, rows: np.ndarray) -> np.ndarray:
-    """(N,) bool: whether each row of ``sex`` is in the held-out set (see the module's docstring)."""
+def held_out(sex: str, rows: np.ndarray, survey: str = "") -> np.ndarray:
+    """(N,) bool: whether each row of ``sex`` is in the held-out set (see the module's docstring);
+    another survey's rows hash as ``"<survey>/<sex>/<row>"``."""
+    prefix = f"{survey}/" if survey else ""
 
     def fraction(row: int) -> float:
-        digest = hashlib.sha256(f"{sex}/{int(row)}".encode()).digest()
+        digest = hashlib.sha256(f"{prefix}{sex}/{int(row)}".encode()).digest()
         return int.from_bytes(digest[:8], "big") / 2.0**64
 
     return np.array([fraction(r) < HELD_OUT_SHARE for r in rows], dtype=bool)
 
 
-def split(population: Population) -> tuple[Population, Population]:
-    """(fitting set, held-out set) of ``population``."""
-    mask = held_out(population.sex, population.rows)
+def split(population: Population, survey: str = "") -> tuple[Population, Population]:
+    """(fitting set, held-out set) of ``population`` (``survey`` as in ``held_out``)."""
+    mask = held_out(population.sex, population.rows, survey)
     return population.subset(~mask), population.subset(mask)
 
 
@@ -130,27 +151,97 @@ def band_index(values: np.ndarray, edges: tuple[float, ...]) -> np.ndarray:
     return np.searchsorted(np.asarray(edges), np.asarray(values, dtype=np.float64), side="right")
 
 
-def outcome(body: BodyModel, gender: float, height_cm: float, weight_kg: float) -> str:
-    """``served``, or why ``shape_from_measurements`` refuses the request (one of ``OUTCOMES``)."""
+def _refusal(error: ShapeOutOfRange, weight_kg: float) -> str:
+    if error.field == "weight_kg" and error.allowed is not None:
+        return "too light" if weight_kg < error.allowed[0] else "too heavy"
+    return {"height_cm": "height"}.get(error.field, "girths")
+
+
+def person_record(builder: BodyBuilder, gender: float, row: dict[str, float], predict: bool) -> dict:
+    """What the service does for one adult asking with their height, weight and hip girth:
+    ``outcome`` (one of ``OUTCOMES``) and, when served, the build time (ms), the signed errors of the
+    given measurements on the built mesh (height and hip cm, weight %), and the body's NHANES waist
+    (iliac crest) against the real one: a girth the shopper did not give. With ``predict``, also
+    the hip of the body built from height and weight alone against the real hip."""
+    h, w, hip = row["BMXHT"], row["BMXWT"], row["BMXHIP"]
+    start = time.perf_counter()
     try:
-        shape_from_measurements(body, gender, height_cm, weight_kg)
+        built = builder.build(BodyRequest(gender, h, w, hip_cm=hip))
     except ShapeOutOfRange as e:
-        if e.field == "height_cm":
-            return "height"
-        if e.field == "weight_kg" and e.allowed is not None:
-            return "too light" if weight_kg < e.allowed[0] else "too heavy"
-        raise
-    return "served"
+        return {"outcome": _refusal(e, w)}
+    m = built.measured
+    record = {"outcome": "served", "build_ms": 1e3 * (time.perf_counter() - start),
+              "height_err_cm": m.height_cm - h, "weight_err_pct": 100.0 * (m.weight_kg - w) / w,
+              "hip_err_cm": m.hip_cm - hip, "iliac_err_cm": m.waist_iliac_cm - row["BMXWAIST"]}  # fmt: skip
+    if predict:
+        try:
+            alone = builder.build(BodyRequest(gender, h, w))
+            record["hip_pred_err_cm"] = alone.measured.hip_cm - hip
+        except ShapeOutOfRange:
+            record["hip_pred_err_cm"] = float("nan")
+    return record
 
 
-def outcomes(body: BodyModel, population: Population) -> np.ndarray:
-    """(N,) str: ``outcome`` of every adult of the population."""
-    return np.array(
-        [
-            outcome(body, population.gender, h, w)
-            for h, w in zip(population.height_cm, population.weight_kg, strict=True)
-        ]
-    )
+def cache_key() -> str:
+    """sha256 (12 hex) of what a record depends on: the body model, the priors and the code that builds."""
+    digest = hashlib.sha256()
+    for path in CACHE_INPUTS:
+        digest.update(path.read_bytes())
+    return digest.hexdigest()[:12]
+
+
+def _records_chunk(args) -> list[tuple[int, dict]]:
+    sex, rows, predict = args
+    builder = _builder()
+    people = load(sex).subset(np.array(rows))
+    out = []
+    for i, r in enumerate(people.rows):
+        row = {c: float(people.columns[c][i]) for c in COLUMNS}
+        out.append((int(r), person_record(builder, people.gender, row, bool(predict[i]))))
+    return out
+
+
+@lru_cache(maxsize=1)
+def _builder() -> BodyBuilder:
+    return BodyBuilder(BodyModel.load(), GirthPriors.load())
+
+
+def records(population: Population, workers: int = 2, cache_dir: Path | None = CACHE_DIR) -> list[dict]:
+    """``person_record`` of every adult of ``population`` (in its order; held-out adults with
+    ``predict``), computed on ``workers`` processes and kept under ``cache_dir/<cache_key>/`` (a rerun
+    reads them; an interrupted run resumes)."""
+    path = None if cache_dir is None else cache_dir / cache_key() / f"{population.sex}.json"
+    done: dict[int, dict] = {}
+    if path is not None and path.exists():
+        done = {int(k): v for k, v in json.loads(path.read_text()).items()}
+    held = held_out(population.sex, population.rows)
+    todo = [(int(r), bool(h)) for r, h in zip(population.rows, held, strict=True) if int(r) not in done]
+    chunks = [todo[i : i + CHUNK] for i in range(0, len(todo), CHUNK)]
+    jobs = [(population.sex, [r for r, _ in c], [p for _, p in c]) for c in chunks]
+    if jobs:
+        with ProcessPoolExecutor(workers) if workers > 1 else _Serial() as pool:
+            for result in pool.map(_records_chunk, jobs):
+                done |= dict(result)
+                if path is not None:
+                    path.parent.mkdir(parents=True, exist_ok=True)
+                    path.write_text(json.dumps(done))
+    return [done[int(r)] for r in population.rows]
+
+
+class _Serial:
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        return False
+
+    def map(self, fn, jobs):
+        return map(fn, jobs)
+
+
+def outcomes_of(recs: list[dict]) -> np.ndarray:
+    """(N,) str: each record's outcome."""
+    return np.array([r["outcome"] for r in recs])
 
 
 def outcome_shares(found: np.ndarray) -> dict[str, float]:
@@ -168,7 +259,14 @@ def _outcome_cells(found: np.ndarray, decimals: int = 0) -> list[str]:
     return [str(len(found)), *(_percent(s, decimals) for s in outcome_shares(found).values())]
 
 
-OUTCOME_HEADER = ["adults", "served", "refused: height", "refused: too light", "refused: too heavy"]
+OUTCOME_HEADER = [
+    "adults",
+    "served",
+    "refused: height",
+    "refused: too light",
+    "refused: too heavy",
+    "refused: girths",
+]
 
 
 def overview_rows(populations: dict[str, Population], found: dict[str, np.ndarray]) -> list[list[str]]:
@@ -213,89 +311,63 @@ def height_rows(populations: dict[str, Population], found: dict[str, np.ndarray]
     return band_rows(populations, found, {s: p.height_cm for s, p in populations.items()}, HEIGHT_EDGES_CM)
 
 
-def sample_served(population: Population, found: np.ndarray, n: int, seed: int = SAMPLE_SEED) -> Population:
-    """Up to ``n`` served adults drawn without replacement (fixed seed), in row order."""
-    served = np.flatnonzero(found == "served")
-    pick = np.random.default_rng(seed).choice(served, size=min(n, len(served)), replace=False)
-    return population.subset(np.sort(pick))
+def _stats(values: np.ndarray, kind: str) -> str:
+    """``median / max`` of |values| (kind "abs"), or signed median / MAE / p90 (kind "signed")."""
+    v = values[np.isfinite(values)]
+    if not len(v):
+        return "-"
+    if kind == "abs":
+        return f"{np.median(np.abs(v)):.2f} / {np.abs(v).max():.2f}"
+    return f"{np.median(v):+.1f} / {np.abs(v).mean():.1f} / {np.percentile(np.abs(v), 90):.1f}"
 
 
-def build_sample(body: BodyModel, population: Population) -> list[dict[str, float]]:
-    """One record per adult: the time to build the body (calibration + rest mesh, ms), the height
-    (cm) and mass (kg) errors measured on the built mesh (``body_measurements``) against NHANES', and
-    the signed errors (cm, mesh minus NHANES) of the hip girth and of the waist at the iliac crest as a
-    tape reads them on the mesh (``service.pipeline.measurements``): girths the body does not take
-    today, so these are what its defaults predict for them."""
-    marks = landmarks(body)
-    records = []
-    girths = zip(population.columns["BMXHIP"], population.columns["BMXWAIST"], strict=True)
-    for h, w, (hip, waist) in zip(population.height_cm, population.weight_kg, girths, strict=True):
-        start = time.perf_counter()
-        beta = shape_from_measurements(body, population.gender, h, w)
-        vertices = body.vertices(beta)
-        ms = 1e3 * (time.perf_counter() - start)
-        height_m, mass_kg = body_measurements(vertices, body.faces)
-        tape = measure(vertices, body.faces, marks)
-        records.append(
-            {"build_ms": ms, "height_err_cm": abs(100.0 * height_m - h), "mass_err_kg": abs(mass_kg - w),
-             "hip_err_cm": tape.hip_cm - hip, "waist_iliac_err_cm": tape.waist_iliac_cm - waist}
-        )  # fmt: skip
-    return records
+ERROR_HEADER = ["sex", "BMI", "served", "height error cm", "weight error %", "hip error cm", "build ms",
+                "build ms, max"]  # fmt: skip
 
 
-BUILD_HEADER = [
-    "sex",
-    "bodies",
-    "build ms, median",
-    "build ms, max",
-    "abs height error cm, median",
-    "height error, max",
-    "abs weight error kg, median",
-    "weight error, max",
-]
-
-
-def build_rows(records: dict[str, list[dict[str, float]]]) -> list[list[str]]:
-    """Per sex: the sample's size, build time and height / weight errors (median, max)."""
+def error_rows(populations: dict[str, Population], recs: dict[str, list[dict]]) -> list[list[str]]:
+    """Per sex and BMI band: the served, the given measurements' errors on the built mesh (|error|
+    median / max) and the build time (median, max)."""
     rows = []
-    for sex, recs in records.items():
-        if not recs:
-            rows.append([sex, "0"] + ["-"] * (len(BUILD_HEADER) - 2))
-            continue
-        ms, dh, dm = (np.array([r[k] for r in recs]) for k in ("build_ms", "height_err_cm", "mass_err_kg"))
-        rows.append(
-            [sex, str(len(recs)), f"{np.median(ms):.2f}", f"{ms.max():.2f}"]
-            + [f"{np.median(dh):.1e}", f"{dh.max():.1e}", f"{np.median(dm):.1e}", f"{dm.max():.1e}"]
-        )
+    for sex, pop in populations.items():
+        band = band_index(pop.bmi, BMI_EDGES)
+        for i, label in enumerate(band_labels(BMI_EDGES)):
+            served = [r for r, b in zip(recs[sex], band, strict=True) if b == i and r["outcome"] == "served"]
+            keys = ("height_err_cm", "weight_err_pct", "hip_err_cm", "build_ms")
+            col = {k: np.array([r[k] for r in served]) for k in keys}
+            ms = col["build_ms"]
+            rows.append(
+                [
+                    sex,
+                    label,
+                    str(len(served)),
+                    _stats(col["height_err_cm"], "abs"),
+                    _stats(col["weight_err_pct"], "abs"),
+                    _stats(col["hip_err_cm"], "abs"),
+                    f"{np.median(ms):.0f}" if len(ms) else "-",
+                    f"{ms.max():.0f}" if len(ms) else "-",
+                ]
+            )
     return rows
 
 
-GIRTH_HEADER = [
-    "sex",
-    "bodies",
-    "hip error cm, median",
-    "abs hip error, median",
-    "abs hip error, p90",
-    "iliac waist error cm, median",
-    "abs iliac waist error, median",
-    "abs iliac waist error, p90",
-]
+PREDICTION_HEADER = ["sex", "BMI", "held-out served", "hip from height and weight: bias / MAE / p90 cm",
+                     "NHANES waist given the hip: bias / MAE / p90 cm"]  # fmt: skip
 
 
-def girth_rows(records: dict[str, list[dict[str, float]]]) -> list[list[str]]:
-    """Per sex: the built bodies' hip and iliac-waist girths against NHANES' (signed median, and the
-    median and 90th percentile of the absolute error, cm)."""
+def prediction_rows(populations: dict[str, Population], recs: dict[str, list[dict]]) -> list[list[str]]:
+    """Per sex and BMI band, held-out adults only: the body's girths the shopper did not give against
+    the real ones (signed median, mean |error|, 90th percentile of |error|, cm)."""
     rows = []
-    for sex, recs in records.items():
-        if not recs:
-            rows.append([sex, "0"] + ["-"] * (len(GIRTH_HEADER) - 2))
-            continue
-        cells = [sex, str(len(recs))]
-        for key in ("hip_err_cm", "waist_iliac_err_cm"):
-            e = np.array([r[key] for r in recs])
-            size = np.abs(e)
-            cells += [f"{np.median(e):+.1f}", f"{np.median(size):.1f}", f"{np.percentile(size, 90):.1f}"]
-        rows.append(cells)
+    for sex, pop in populations.items():
+        band = band_index(pop.bmi, BMI_EDGES)
+        held = held_out(sex, pop.rows)
+        for i, label in enumerate([*band_labels(BMI_EDGES), "all"]):
+            pick = [r for r, b, h in zip(recs[sex], band, held, strict=True)
+                    if h and (b == i or label == "all") and "hip_pred_err_cm" in r]  # fmt: skip
+            rows.append([sex, label, str(len(pick)),
+                         _stats(np.array([r["hip_pred_err_cm"] for r in pick]), "signed"),
+                         _stats(np.array([r["iliac_err_cm"] for r in pick]), "signed")])  # fmt: skip
     return rows
 
 
@@ -308,32 +380,106 @@ def print_table(title: str, header: list[str], rows: list[list[str]]) -> None:
     print()
 
 
+# Outfits of 2-4 garments tried on the tails, in turn (the benchmarks.outfits ones plus a skirt).
+TAIL_OUTFITS = (
+    ("tshirt", "jacket"),
+    ("pants", "tshirt", "jacket"),
+    ("tank_top", "tshirt", "long_sleeve", "jacket"),
+    ("shorts", "tank_top"),
+    ("skirt", "tshirt", "jacket"),
+)
+TAILS = ("BMI over 40", "shortest", "tallest")
+
+
+def tail_people(populations: dict[str, Population], per_tail: int) -> list[tuple[str, str, int]]:
+    """(tail, sex, row) of ``per_tail`` held-out adults per tail, both sexes together: the highest BMIs
+    over 40, the shortest, the tallest (each adult at most once)."""
+    held = {sex: p.subset(held_out(sex, p.rows)) for sex, p in populations.items()}
+    every = [(sex, int(r), float(p.bmi[i]), float(p.height_cm[i])) for sex, p in held.items()
+             for i, r in enumerate(p.rows)]  # fmt: skip
+    keys = {"BMI over 40": lambda e: -e[2], "shortest": lambda e: e[3], "tallest": lambda e: -e[3]}
+    chosen, taken = [], set()
+    for tail in TAILS:
+        pick = [e for e in sorted(every, key=keys[tail]) if (e[0], e[1]) not in taken]
+        pick = [e for e in pick if tail != "BMI over 40" or e[2] > 40.0][:per_tail]
+        chosen += [(tail, sex, row) for sex, row, _, _ in pick]
+        taken |= {(e[0], e[1]) for e in pick}
+    return chosen
+
+
+def outfit_records(populations: dict[str, Population], per_tail: int) -> list[dict]:
+    """Each tail adult (``tail_people``) dressed in the next of ``TAIL_OUTFITS`` by the service's own
+    engine: ``collision_free`` and the body and outfit times (ms, this process, warm caches)."""
+    from service.pipeline.tryon import ModelEngine, OutfitSpec
+
+    engine = ModelEngine.load(models_dir(), threads=2)
+    out = []
+    for k, (tail, sex, row) in enumerate(tail_people(populations, per_tail)):
+        p = populations[sex]
+        i = int(np.flatnonzero(p.rows == row)[0])
+        garments = TAIL_OUTFITS[k % len(TAIL_OUTFITS)]
+        spec = OutfitSpec(garments, p.gender, float(p.height_cm[i]), float(p.weight_kg[i]),
+                          hip_cm=float(p.columns["BMXHIP"][i]), measure=False)  # fmt: skip
+        start = time.perf_counter()
+        engine.body(spec)
+        body_ms = 1e3 * (time.perf_counter() - start)
+        result = engine.make(spec)
+        outfit_ms = 1e3 * (time.perf_counter() - start) - body_ms
+        out.append({"tail": tail, "sex": sex, "bmi": float(p.bmi[i]), "height_cm": float(p.height_cm[i]),
+                    "garments": len(garments), "clean": bool(result.report.get("collision_free")),
+                    "body_ms": body_ms, "outfit_ms": outfit_ms})  # fmt: skip
+    return out
+
+
+OUTFIT_HEADER = ["tail", "adults", "BMI", "height cm", "garments", "clean", "body ms, median",
+                 "outfit ms, median", "outfit ms, max"]  # fmt: skip
+
+
+def outfit_rows(recs: list[dict]) -> list[list[str]]:
+    rows = []
+    for tail in TAILS:
+        rs = [r for r in recs if r["tail"] == tail]
+        if not rs:
+            continue
+        keys = ("bmi", "height_cm", "garments", "body_ms", "outfit_ms")
+        col = {k: np.array([r[k] for r in rs]) for k in keys}
+        rows.append([tail, str(len(rs)), f"{col['bmi'].min():.0f}-{col['bmi'].max():.0f}",
+                     f"{col['height_cm'].min():.0f}-{col['height_cm'].max():.0f}",
+                     f"{col['garments'].min():.0f}-{col['garments'].max():.0f}",
+                     f"{sum(r['clean'] for r in rs)} of {len(rs)}", f"{np.median(col['body_ms']):.0f}",
+                     f"{np.median(col['outfit_ms']):.0f}", f"{col['outfit_ms'].max():.0f}"])  # fmt: skip
+    return rows
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--sample", type=int, default=DEFAULT_SAMPLE, help="served adults built per sex")
-    args = parser.parse_args(argv)
-    body = BodyModel.load()
-    populations = load_all()
-    found = {sex: outcomes(body, pop) for sex, pop in populations.items()}
-    print_table(
-        "NHANES adults (2017-March 2020) served today", OVERVIEW_HEADER, overview_rows(populations, found)
+    parser.add_argument("--all", action="store_true", help="every adult (default: the held-out sets)")
+    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument(
+        "--outfits",
+        type=int,
+        default=0,
+        metavar="N",
+        help="also dress N held-out adults of each tail (BMI over 40, shortest, tallest)",
     )
+    args = parser.parse_args(argv)
+    populations = load_all()
+    if not args.all:
+        populations = {sex: p.subset(held_out(sex, p.rows)) for sex, p in populations.items()}
+    recs = {sex: records(p, args.workers) for sex, p in populations.items()}
+    found = {sex: outcomes_of(r) for sex, r in recs.items()}
+    who = "every adult" if args.all else "the held-out sets"
+    print_table(f"NHANES adults served, given height, weight and hip ({who})", OVERVIEW_HEADER,
+                overview_rows(populations, found))  # fmt: skip
     print_table("By BMI band (kg/m^2)", ["sex", "BMI", *OUTCOME_HEADER], bmi_rows(populations, found))
     print_table("By height band (cm)", ["sex", "height cm", *OUTCOME_HEADER], height_rows(populations, found))
-    records = {
-        sex: build_sample(body, sample_served(pop, found[sex], args.sample))
-        for sex, pop in populations.items()
-    }
-    print_table(
-        f"Built bodies ({args.sample} served adults per sex, seed {SAMPLE_SEED})",
-        BUILD_HEADER,
-        build_rows(records),
-    )
-    print_table(
-        "Girths of the built bodies against NHANES' (the service takes no girth today)",
-        GIRTH_HEADER,
-        girth_rows(records),
-    )
+    print_table("Given measurements on the built bodies (abs error median / max)", ERROR_HEADER,
+                error_rows(populations, recs))  # fmt: skip
+    print_table("Girths not given, held-out adults (body minus NHANES)", PREDICTION_HEADER,
+                prediction_rows(populations, recs))  # fmt: skip
+    if args.outfits:
+        print_table(f"Outfits on the tails ({args.outfits} held-out adults each)", OUTFIT_HEADER,
+                    outfit_rows(outfit_records(load_all(), args.outfits)))  # fmt: skip
 
 
 if __name__ == "__main__":

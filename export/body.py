@@ -18,6 +18,8 @@ npz contents:
     uv (T, 2) float32, face_uv (F, 3) int32   Anny's texture coordinates (origin bottom left), per corner
     regions (V,) uint8, region_names (R,) str  coarse body part of each vertex
     bone_names (J,) str, bone_heads (J, 3) float64  joint positions at DEFAULT_BETA
+    local_names (L,) str, local_deltas (L, 2, V, 3) float32  each local change's displacement at +1
+                                             and at -1 (its "-incr" and "-decr" targets)
     beta_labels (3,) str, fixed_phenotype_names (P,) str, fixed_phenotype_values (P,) float64,
     topology, anny_version: str scalars
 """
@@ -31,14 +33,22 @@ from pathlib import Path
 
 import numpy as np
 
-from service.pipeline.body import DEFAULT_BETA, SUPPORTED_HEIGHT_PARAM, SUPPORTED_WEIGHT_PARAM, BodyModel
+from service.pipeline.body import (
+    DEFAULT_BETA,
+    SHAPE_BOUNDS,
+    SUPPORTED_HEIGHT_PARAM,
+    SUPPORTED_WEIGHT_PARAM,
+    BodyModel,
+)
 from service.process.paths import models_dir
 from training.anny_body import (
     BETA_LABELS,
     FIXED_PHENOTYPES,
+    LOCAL_CHANGES,
     TOPOLOGY,
     anny_faces,
     anny_rest,
+    anny_rest_extended,
     bone_labels,
     dominant_bone,
     load_anny,
@@ -105,6 +115,14 @@ def build_arrays() -> dict[str, np.ndarray]:
     corners = anny_rest(grid.reshape(-1, 3)).vertices  # (12, V, 3) float64
     corners = corners.reshape(*grid.shape[:3], *corners.shape[1:])
 
+    # Local changes add a fixed displacement, the same at every phenotype, linear on each side of 0
+    # (checked by ``parity_errors_mm`` on extended shapes).
+    n_local = len(LOCAL_CHANGES)
+    base = anny_rest_extended(np.array([DEFAULT_BETA]), np.zeros((1, n_local)))[0]
+    unit = np.concatenate([np.eye(n_local), -np.eye(n_local)])
+    deltas = anny_rest_extended(np.repeat([DEFAULT_BETA], 2 * n_local, axis=0), unit) - base
+    deltas = deltas.reshape(2, n_local, *base.shape).transpose(1, 0, 2, 3)
+
     bones = bone_labels()
     mean = anny_rest(np.array([DEFAULT_BETA]))
     names, values = zip(*FIXED_PHENOTYPES.items(), strict=True)
@@ -122,6 +140,8 @@ def build_arrays() -> dict[str, np.ndarray]:
         "bone_names": np.array(bones),
         "bone_heads": mean.bone_heads[0],
         "beta_labels": np.array(BETA_LABELS),
+        "local_names": np.array(list(LOCAL_CHANGES)),
+        "local_deltas": deltas.astype(np.float32),
         "fixed_phenotype_names": np.array(names),
         "fixed_phenotype_values": np.array(values, dtype=np.float64),
         "topology": np.array(TOPOLOGY),
@@ -142,12 +162,29 @@ def parity_errors_mm(body: BodyModel, betas: np.ndarray) -> np.ndarray:
     return 1e3 * np.linalg.norm(body.vertices_batch(betas) - anny_rest(betas).vertices, axis=-1)
 
 
+def sample_extended_shapes(n: int, seed: int) -> np.ndarray:
+    """Shapes ``(n, 3 + L)`` uniform over ``SHAPE_BOUNDS`` (extrapolated phenotypes, local changes)."""
+    lo, hi = np.array(SHAPE_BOUNDS, dtype=np.float64).T
+    return lo + (hi - lo) * np.random.default_rng(seed).uniform(size=(n, len(lo)))
+
+
+def extended_parity_errors_mm(body: BodyModel, shapes: np.ndarray) -> np.ndarray:
+    """Per-vertex distance ``(B, V)`` in mm between the runtime body and the extended Anny."""
+    anny = anny_rest_extended(shapes[:, :3], shapes[:, 3:])
+    return 1e3 * np.linalg.norm(body.shape_vertices_batch(shapes) - anny, axis=-1)
+
+
 def export(path: Path) -> BodyModel:
     """Write the npz to ``path``, reload it with the runtime and check parity against Anny."""
     path.parent.mkdir(parents=True, exist_ok=True)
     np.savez_compressed(path, **build_arrays())
     body = BodyModel.load(path)
-    err = parity_errors_mm(body, sample_supported_betas(PARITY_SAMPLES, PARITY_SEED))
+    err = np.concatenate(
+        [
+            parity_errors_mm(body, sample_supported_betas(PARITY_SAMPLES, PARITY_SEED)).ravel(),
+            extended_parity_errors_mm(body, sample_extended_shapes(PARITY_SAMPLES, PARITY_SEED)).ravel(),
+        ]
+    )
     if err.max() >= PARITY_TOLERANCE_MM:
         raise RuntimeError(f"runtime body differs from Anny by {err.max():.4f} mm >= {PARITY_TOLERANCE_MM}")
     print(

@@ -19,6 +19,16 @@ TOPOLOGY = "anny-noeyes-notongue"
 BETA_LABELS = ("gender", "height", "weight")
 # age 2/3 is Anny's "young adult" anchor; the others sit at their neutral value.
 FIXED_PHENOTYPES = {"age": 2.0 / 3.0, "muscle": 0.25, "proportions": 0.5}
+# MakeHuman's girth targets that shape a body beyond its phenotypes (issue 55, decision 0020): each is one
+# signed local change, its "-incr" target for positive values and its "-decr" target for negative ones.
+LOCAL_CHANGES = {
+    "waist": "measure-waist-circ-incr",
+    "hips": "measure-hips-circ-incr",
+    "bust": "measure-bust-circ-incr",
+    "thigh": "measure-thigh-circ-incr",
+    "upperarm": "measure-upperarm-circ-incr",
+    "belly": "stomach-pregnant-incr",
+}
 DEFAULT_CACHE_DIR = Path(os.environ.get("ULNEF_CACHE_DIR", Path.home() / ".cache" / "ulnef")) / "anny"
 
 
@@ -31,6 +41,34 @@ def load_anny():
     model = anny.Anny(topology=TOPOLOGY)
     model.requires_grad_(False)
     return model
+
+
+@lru_cache(maxsize=1)
+def load_anny_extended():
+    """Anny with extrapolated phenotypes and the ``LOCAL_CHANGES`` (the shapes of real adults)."""
+    os.environ.setdefault("ANNY_CACHE_DIR", str(DEFAULT_CACHE_DIR))
+    import anny
+
+    model = anny.Anny(
+        topology=TOPOLOGY, extrapolate_phenotypes=True, local_changes=list(LOCAL_CHANGES.values())
+    )
+    model.requires_grad_(False)
+    return model
+
+
+def anny_rest_extended(betas: np.ndarray, local: np.ndarray) -> np.ndarray:
+    """Rest vertices ``(B, V, 3)`` float64 of the extended Anny for betas ``(B, 3)`` (any real values:
+    the phenotypes are extrapolated) and local changes ``(B, L)`` in ``LOCAL_CHANGES`` order."""
+    import torch
+
+    model = load_anny_extended()
+    betas, local = np.atleast_2d(betas), np.atleast_2d(local)
+    kw = phenotype_kwargs(betas)
+    order = [list(model.local_change_labels).index(label) for label in LOCAL_CHANGES.values()]
+    changes = torch.zeros((len(betas), len(order)), dtype=model.dtype)
+    changes[:, order] = torch.as_tensor(local, dtype=model.dtype)
+    out = model(phenotype_kwargs=kw, local_changes_kwargs=changes)
+    return out["rest_vertices"].detach().double().numpy()
 
 
 def phenotype_kwargs(betas: np.ndarray) -> dict:

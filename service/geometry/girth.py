@@ -18,6 +18,8 @@ perimeter on an elliptic cylinder and against the hull of the raw triangle-plane
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 from numba import njit
 
@@ -57,9 +59,10 @@ class _Slicer:
         self.highest = self.fz.max(axis=1)
         self.span = float((self.highest - self.lowest).max()) if len(faces) else 0.0
 
-    def crossings(self, z: float) -> tuple[np.ndarray, np.ndarray]:
-        """The plane z's crossings: node points ``(N, 2)`` (one per crossed edge) and ``succ (N,)``,
-        the node after each along the section (face orientation). Raises ValueError where the section
+    def crossing_edges(self, z: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The plane z's crossings: node points ``(N, 2)`` (one per crossed edge), ``succ (N,)``, the
+        node after each along the section (face orientation), and each node's edge ``a, b (N,)`` int
+        and parameter ``t (N,)`` (the point is ``a + t (b - a)``). Raises ValueError where the section
         is open (a crossed edge with one face: the mesh has a boundary there) or not a set of loops."""
         # A crossed face has lowest <= z < highest <= lowest + span.
         run = slice(*np.searchsorted(self.lowest, [z - self.span, z], side="right"))
@@ -67,7 +70,8 @@ class _Slicer:
         tri = self.faces[run][hit]
         n_vertices = len(self.vertices)
         if not len(tri):
-            return np.empty((0, 2)), np.empty(0, dtype=np.int64)
+            empty = np.empty(0, dtype=np.int64)
+            return np.empty((0, 2)), empty, empty, empty, np.empty(0)
         above = self.fz[run][hit] > z  # (T, 3)
         # Edge k runs from corner k to corner k + 1; exactly one edge of a crossed triangle goes down
         # (above -> below) and one goes up. The section runs from the down edge to the up edge:
@@ -85,7 +89,8 @@ class _Slicer:
         node = node.reshape(len(tri), 2)
         if np.any(np.bincount(node.ravel(), minlength=len(keys)) != 2):
             raise ValueError(f"the section at z={z:g} is open: the mesh is not closed there")
-        a, b = self.vertices[keys // n_vertices], self.vertices[keys % n_vertices]
+        ia, ib = keys // n_vertices, keys % n_vertices
+        a, b = self.vertices[ia], self.vertices[ib]
         t = (z - a[:, 2]) / (b[:, 2] - a[:, 2])
         points = a[:, :2] + t[:, None] * (b[:, :2] - a[:, :2])
         succ = np.full(len(keys), -1, dtype=np.int64)
@@ -94,6 +99,11 @@ class _Slicer:
             raise ValueError(
                 f"the section at z={z:g} is not a set of loops: the faces' orientations disagree"
             )
+        return points, succ, ia, ib, t
+
+    def crossings(self, z: float) -> tuple[np.ndarray, np.ndarray]:
+        """Node points ``(N, 2)`` and ``succ (N,)`` of ``crossing_edges``."""
+        points, succ, _, _, _ = self.crossing_edges(z)
         return points, succ
 
     def loops(self, z: float) -> list[np.ndarray]:
@@ -260,3 +270,47 @@ def tape_girths(
         if loop is not None:
             girths[i] = polyline_length(hulls[-1])
     return girths, hulls
+
+
+@dataclass(frozen=True, eq=False)
+class TapeEdges:
+    """Where a tape's corners come from: corner i is ``vertices[a_i] + t_i (vertices[b_i] - vertices[a_i])``
+    (x, y) at height z, so the girth's derivative w.r.t. the vertices follows (``body_fit``).
+
+    points: (H, 2) the hull's corners, counter-clockwise; a, b: (H,) int mesh edges; t: (H,) float.
+    """
+
+    points: np.ndarray
+    a: np.ndarray
+    b: np.ndarray
+    t: np.ndarray
+
+    @property
+    def girth(self) -> float:
+        return polyline_length(self.points)
+
+
+def tape_edges(
+    vertices: np.ndarray, faces: np.ndarray, zs: np.ndarray, select: np.ndarray
+) -> list[TapeEdges]:
+    """``tape_loop`` at each height ``zs (L,)`` around ``select (2,)``, with each hull corner's mesh
+    edge (``TapeEdges``). Raises ValueError where no loop goes around the point."""
+    slicer = _Slicer(vertices, faces)
+    point = _check_points(np.reshape(select, (1, 2)))[0]
+    out = []
+    for z in np.asarray(zs, dtype=np.float64).reshape(-1):
+        points, succ, a, b, t = slicer.crossing_edges(_check_level(z))
+        best = None
+        if len(succ):
+            order, starts = _order_cycles(succ)
+            loops = [order[s:e] for s, e in zip(starts[:-1], starts[1:], strict=True)]
+            around = [ix for ix in loops if encloses(points[ix], point)]
+            best = max(around, key=lambda ix: abs(signed_area(points[ix]))) if around else None
+        if best is None:
+            raise ValueError(f"no loop of the section at z={z:g} goes around {tuple(point.tolist())}")
+        hull = convex_hull(points[best])
+        # The hull's corners are copies of loop points: find which (exact equality).
+        key = {(x, y): i for i, (x, y) in zip(best.tolist(), points[best].tolist(), strict=True)}
+        idx = np.array([key[(x, y)] for x, y in hull.tolist()], dtype=np.int64)
+        out.append(TapeEdges(hull, a[idx], b[idx], t[idx]))
+    return out

@@ -44,6 +44,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -55,6 +56,14 @@ from service.process.paths import models_dir
 
 BETA_LABELS = ("gender", "height", "weight")
 DEFAULT_BETA = (0.5, 0.5, 0.5)
+# The extended shape (issue 55, decision 0020): the three phenotypes extrapolated past Anny's anchors,
+# plus these local changes (MakeHuman's girth targets, signed, exported by ``python -m export.body``).
+LOCAL_NAMES = ("waist", "hips", "bust", "thigh", "upperarm", "belly")
+SHAPE_LABELS = BETA_LABELS + LOCAL_NAMES
+# Bounds of the extended shape. Height: 140-205 cm in both sexes with room (women 122 cm at 0, men
+# 224 cm at 0.8). Weight: past ~2.5 Anny's surface folds and self-intersects (decision 0020). Local
+# changes: the study's fits of 120 NHANES adults used -1.5..2.6; a margin on both sides.
+SHAPE_BOUNDS = ((0.0, 1.0), (-0.1, 0.85), (-0.5, 2.5)) + ((-2.0, 3.0),) * len(LOCAL_NAMES)
 BODY_DENSITY_KG_M3 = 1010.0
 SUPPORTED_HEIGHT_PARAM = (0.12, 0.72)
 SUPPORTED_WEIGHT_PARAM = (0.0, 1.0)
@@ -100,9 +109,15 @@ def hat_slopes(x: np.ndarray, anchors: np.ndarray) -> np.ndarray:
     return slopes
 
 
-def _hat_segments(x: np.ndarray, anchors: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _hat_segments(
+    x: np.ndarray, anchors: np.ndarray, extrapolate: bool = False
+) -> tuple[np.ndarray, np.ndarray]:
+    """Coefficients and slopes; with ``extrapolate`` a value past an end anchor continues the end
+    segment linearly (Anny's ``extrapolate_phenotypes``: coefficients below 0 and above 1)."""
     anchors = np.asarray(anchors, dtype=np.float64)
-    x = np.clip(np.asarray(x, dtype=np.float64), anchors[0], anchors[-1])
+    x = np.asarray(x, dtype=np.float64)
+    if not extrapolate:
+        x = np.clip(x, anchors[0], anchors[-1])
     n = len(anchors)
     upper = np.clip(np.searchsorted(anchors, x, side="left"), 1, n - 1)
     width = anchors[upper] - anchors[upper - 1]
@@ -252,6 +267,45 @@ def check_betas(betas: np.ndarray, batched: bool = True) -> np.ndarray:
     return arr
 
 
+def shape_coefficients(
+    shapes: np.ndarray, anchors: tuple[np.ndarray, ...], n_local: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Basis coefficients ``u (B, K)`` and their Jacobian ``(B, S, K)`` of extended shapes ``(B, S)``,
+    S = 3 + n_local, K = C + 2 n_local: the C corner weights (extrapolated hats), then each local
+    change's positive part, then its negative part, so ``vertices = sum_k u_k basis_k``."""
+    a, s = zip(*(_hat_segments(shapes[:, k], anchors[k], extrapolate=True) for k in range(3)), strict=True)
+    b = len(shapes)
+    weights = np.einsum("bi,bj,bk->bijk", *a).reshape(b, -1)
+    c = weights.shape[1]
+    jac = np.zeros((b, 3 + n_local, c + 2 * n_local))
+    jac[:, 0, :c] = np.einsum("bi,bj,bk->bijk", s[0], a[1], a[2]).reshape(b, -1)
+    jac[:, 1, :c] = np.einsum("bi,bj,bk->bijk", a[0], s[1], a[2]).reshape(b, -1)
+    jac[:, 2, :c] = np.einsum("bi,bj,bk->bijk", a[0], a[1], s[2]).reshape(b, -1)
+    local = shapes[:, 3:]
+    rows = np.arange(n_local)
+    # At exactly 0 the derivative is one-sided (the positive side): the fit starts there.
+    jac[:, 3 + rows, c + rows] = local >= 0.0
+    jac[:, 3 + rows, c + n_local + rows] = -(local < 0.0).astype(np.float64)
+    return np.concatenate([weights, np.maximum(local, 0.0), np.maximum(-local, 0.0)], axis=1), jac
+
+
+def check_shapes(shapes: np.ndarray, n_local: int, batched: bool = True) -> np.ndarray:
+    """Return extended shapes as float64, raising ValueError unless ``(B, 3 + n_local)`` (or
+    ``(3 + n_local,)``), finite and within ``SHAPE_BOUNDS``."""
+    arr = np.asarray(shapes, dtype=np.float64)
+    n = 3 + n_local
+    if not ((arr.ndim == 2 and arr.shape[1] == n) if batched else arr.shape == (n,)):
+        want = f"(B, {n})" if batched else f"({n},)"
+        raise ValueError(f"shape must be {want}, got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError("shape must be finite")
+    lo, hi = np.array(SHAPE_BOUNDS[:n]).T
+    bad = np.flatnonzero(np.any((arr < lo) | (arr > hi), axis=tuple(range(arr.ndim - 1))))
+    if bad.size:
+        raise ValueError(f"shape out of SHAPE_BOUNDS: {', '.join(SHAPE_LABELS[k] for k in bad)}")
+    return arr
+
+
 # ---------------------------------------------------------------- the model
 
 
@@ -266,6 +320,8 @@ class BodyModel:
     bone_names, bone_heads: (J,) names and (J, 3) float64 joint positions at ``DEFAULT_BETA``.
     display: Anny's UVs as a display mesh over ``faces`` (None in a file exported without them).
     metadata: fixed phenotypes, topology and Anny version the file was exported with.
+    local_names, local_deltas: (L,) names and (L, 2, V, 3) float64 displacements of the local changes
+    at +1 and -1 (an older file without them has L = 0).
     """
 
     corners: np.ndarray = field(repr=False)
@@ -277,6 +333,8 @@ class BodyModel:
     bone_heads: np.ndarray = field(repr=False)
     metadata: dict = field(default_factory=dict)
     display: DisplayMesh | None = field(default=None, repr=False)
+    local_names: tuple[str, ...] = ()
+    local_deltas: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 0, 3)), repr=False)
     extreme_z: np.ndarray = field(init=False, repr=False)  # (C, K) z of the possible extremes
     volume_tensor: np.ndarray = field(init=False, repr=False)  # (C, C, C)
 
@@ -321,11 +379,41 @@ class BodyModel:
             bone_heads=data["bone_heads"].astype(np.float64),
             metadata=metadata,
             display=display_mesh(faces, data["face_uv"], data["uv"]) if "uv" in data else None,
+            **_local_changes(path, data),
         )
 
     @property
     def n_vertices(self) -> int:
         return self.corners.shape[1]
+
+    @property
+    def n_local(self) -> int:
+        return len(self.local_names)
+
+    @cached_property
+    def basis(self) -> np.ndarray:
+        """``(K, V, 3)``: the corner bodies, then the local changes at +1, then at -1."""
+        deltas = self.local_deltas
+        return np.concatenate([self.corners, deltas[:, 0], deltas[:, 1]]) if len(deltas) else self.corners
+
+    @cached_property
+    def shape_volume_tensor(self) -> np.ndarray:
+        """``(K, K, K)``: ``volume_tensor`` of ``basis`` (~1 s, made on first use)."""
+        return volume_tensor(self.basis, self.faces)
+
+    def as_shape(self, beta: np.ndarray) -> np.ndarray:
+        """The extended shape ``(3 + L,)`` of beta ``(3,)``: no local change."""
+        return np.concatenate([check_betas(beta, batched=False), np.zeros(self.n_local)])
+
+    def shape_vertices(self, shape: np.ndarray) -> np.ndarray:
+        """Rest vertices ``(V, 3)`` float64 of one extended shape ``(3 + L,)``."""
+        return self.shape_vertices_batch(check_shapes(shape, self.n_local, batched=False)[None])[0]
+
+    def shape_vertices_batch(self, shapes: np.ndarray) -> np.ndarray:
+        """Rest vertices ``(B, V, 3)`` float64 of extended shapes ``(B, 3 + L)``."""
+        shapes = check_shapes(shapes, self.n_local)
+        u, _ = shape_coefficients(shapes, self.anchors, self.n_local)
+        return blend_corners(u, self.basis)
 
     def vertices(self, beta: np.ndarray) -> np.ndarray:
         """Rest vertices ``(V, 3)`` float64 in metres for one beta ``(3,)``."""
@@ -345,6 +433,18 @@ class BodyModel:
         volume, dvolume = volume_and_gradient(w, dw, self.volume_tensor)
         jac = np.stack([dheight, BODY_DENSITY_KG_M3 * dvolume], axis=1)
         return height, BODY_DENSITY_KG_M3 * volume, jac
+
+
+def _local_changes(path: Path, data: dict) -> dict:
+    if "local_deltas" not in data:
+        return {}
+    names = tuple(data["local_names"].tolist())
+    if names != LOCAL_NAMES:
+        raise ValueError(f"{path}: local changes {names} are not the service's {LOCAL_NAMES}")
+    deltas = data["local_deltas"].astype(np.float64)
+    if deltas.shape != (len(names), 2, *data["corner_vertices"].shape[3:]):
+        raise ValueError(f"{path}: local_deltas {deltas.shape} does not match the corners")
+    return {"local_names": names, "local_deltas": deltas}
 
 
 # ---------------------------------------------------------------- human units

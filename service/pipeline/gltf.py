@@ -53,13 +53,15 @@ REPEAT_SAMPLER = {"magFilter": 9729, "minFilter": 9987, "wrapS": 10497, "wrapT":
 @dataclass(frozen=True)
 class GltfLayer:
     """One node: vertices (V, 3) m in Anny's frame, faces (F, 3) int; optional display mesh and material
-    (without a material the layer gets its flat colour from ``COLORS``)."""
+    (without a material the layer gets its flat colour from ``COLORS``); ``extras``, JSON-able, go on
+    the node as glTF ``extras`` (the body's measurements)."""
 
     name: str
     vertices: np.ndarray
     faces: np.ndarray
     display: DisplayMesh | None = None
     material: Material | None = None
+    extras: dict | None = None
 
 
 def _pad(data: bytes, fill: bytes = b"\0") -> bytes:
@@ -172,6 +174,8 @@ def outfit_glb(layers: Sequence[GltfLayer | tuple], compression: Compression = "
             (v, normals), faces = layer.display.place(v, f, normals), layer.display.faces
             normals, uv = normals.astype(np.float32), layer.display.uv
         node, uv_transform = {"name": name, "mesh": i}, None
+        if layer.extras:
+            node["extras"] = layer.extras
         if compression == "none":
             attributes = {
                 "POSITION": out.add((v @ ANNY_TO_GLTF.T).astype(np.float32), 34962, 5126, "VEC3", True),

@@ -15,6 +15,7 @@ import numpy as np
 
 from service.geometry.sdf_grid import SdfGrid
 from service.pipeline.body import DEFAULT_BETA, BodyModel
+from service.pipeline.body_build import BodyBuilder
 from service.pipeline.canonical import CanonicalSpace
 from service.pipeline.catalog import Garment, load_catalog
 from service.pipeline.collisions.caches import PairCaches
@@ -22,6 +23,7 @@ from service.pipeline.collisions.clearance import BodyClearance
 from service.pipeline.collisions.layering import Refusal
 from service.pipeline.explicit import ExplicitModel, ExplicitOnnx
 from service.pipeline.fields import FieldSet
+from service.pipeline.girth_priors import GirthPriors
 from service.pipeline.untangle import untangle_with_jacobian
 from service.pipeline.untangle_onnx import NeuralUntangler
 
@@ -39,6 +41,7 @@ class LoadedModels:
     neural_untangler: NeuralUntangler
     space: CanonicalSpace
     body_sdf: SdfGrid | None = None
+    priors: GirthPriors | None = None  # None: the bundled models' (``GirthPriors.load()``)
 
     @classmethod
     def load(cls, directory: Path | None = None, threads: int = 2, imported: list[Path] = ()) -> LoadedModels:
@@ -67,17 +70,20 @@ class LoadedModels:
             NeuralUntangler(directory / "untangler", threads),
             CanonicalSpace.build(body.vertices(np.asarray(DEFAULT_BETA)), body.faces, threads),
             SdfGrid.load(sdf) if (sdf := directory / "body" / "mean_sdf.npz").exists() else None,
+            GirthPriors.load(p) if (p := directory / "body" / "girth_priors.json").exists() else None,
         )  # fmt: skip
 
 
 class OutfitModels:
     """Everything a request needs: the loaded models (``loaded``), the body-clearance helpers
-    (``clearance``) and the collision caches (``pairs``), made once per process."""
+    (``clearance``), the collision caches (``pairs``) and the shoppers' bodies (``bodies``), made once
+    per process."""
 
     def __init__(self, loaded: LoadedModels):
         self.loaded = loaded
         self.clearance = BodyClearance(loaded.space.closest, loaded.body_sdf)
         self.pairs = PairCaches(loaded.catalog, loaded.explicit, loaded.space, self.clearance)
+        self.bodies = BodyBuilder(loaded.body, loaded.priors or GirthPriors.load())
 
     @classmethod
     def load(cls, directory: Path | None = None, threads: int = 2, imported: list[Path] = ()) -> OutfitModels:

@@ -76,8 +76,11 @@ def make_outfit(
     body_field: BodyFieldKind = "exact",
     repair: bool = True,
     collisions: CollisionSettings = SETTINGS,
+    body_vertices: np.ndarray | None = None,
 ) -> Outfit:
-    """Dress the body of shape ``beta (3,)`` in ``garment_ids`` (inner to outer).
+    """Dress the body of shape ``beta (3,)`` in ``garment_ids`` (inner to outer); ``body_vertices (V, 3)``,
+    when given, is the body instead (a shopper's own, ``body_build``), ``beta`` the code its garments
+    take.
 
     With ``untangle_layers``: the field fit, then (``repair``) the exact repair of
     ``service.pipeline.collisions.repair``.
@@ -86,7 +89,7 @@ def make_outfit(
     beta = np.asarray(beta, dtype=np.float64)
     seconds: dict[str, float] = {}
     t_total = t0 = time.perf_counter()
-    body = models.body.vertices(beta)
+    body = models.body.vertices(beta) if body_vertices is None else np.asarray(body_vertices, float)
     seconds["body"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     # Each garment's explicit model and body clearance on its own thread (onnxruntime and the kernels

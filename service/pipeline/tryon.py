@@ -30,6 +30,9 @@ GARMENT_ID = rf"[a-z][a-z0-9_]{{0,{GARMENT_ID_MAX_CHARS - 1}}}"  # a regex, with
 GARMENT_ID_RULE = f"1-{GARMENT_ID_MAX_CHARS} lower case letters, digits and _, starting with a letter"
 
 
+GIRTH_FIELDS = ("chest_cm", "waist_cm", "hip_cm")
+
+
 class InvalidField(ValueError):
     """A request value the models cannot serve: ``field`` is its dotted path, ``allowed`` says what is."""
 
@@ -47,6 +50,9 @@ class OutfitSpec:
     gender: float = 0.0
     height_cm: float = 178.0
     weight_kg: float = 75.0
+    chest_cm: float | None = None
+    waist_cm: float | None = None
+    hip_cm: float | None = None
     untangle: bool = True
     include_body: bool = True
     measure: bool = False
@@ -55,6 +61,7 @@ class OutfitSpec:
     def canonical_json(self) -> str:
         """Stable text of the request: same outfit, same text (floats by ``repr``, keys sorted)."""
         fields = asdict(self) | {k: float(getattr(self, k)) for k in ("gender", "height_cm", "weight_kg")}
+        fields |= {k: None if getattr(self, k) is None else float(getattr(self, k)) for k in GIRTH_FIELDS}
         return json.dumps(fields | {"garments": list(self.garments)}, sort_keys=True, separators=(",", ":"))
 
     def outfit_id(self, model_version: str) -> str:
@@ -111,10 +118,15 @@ class Engine(Protocol):
 
     def make(self, spec: OutfitSpec) -> OutfitResult: ...
 
-    def body_ranges(self, gender: float, height_cm: float | None) -> dict:
-        """``{"height_cm": (lo, hi), "weight_kg": (lo, hi), "at_height_cm": h}``: what ``validate``
-        accepts for this gender, the weights at ``height_cm`` (clamped into the height range; its
-        middle when None). Bounds as refusals print them (``service.pipeline.body.printed_bounds``)."""
+    def make_body(self, spec: OutfitSpec) -> OutfitResult:
+        """The body of ``spec`` alone (its garments are ignored): GLB and ``report["body"]``."""
+
+    def body_ranges(self, gender: float, height_cm: float | None, weight_kg: float | None = None) -> dict:
+        """``{"height_cm": (lo, hi), "weight_kg": (lo, hi), "at_height_cm": h, "at_weight_kg": w,
+        "chest_cm": ..., "waist_cm": ..., "hip_cm": ...}``: what ``validate`` accepts for this gender,
+        the weights at ``height_cm`` (clamped into the height range; its middle when None) and the
+        girths at ``weight_kg`` (likewise). Bounds as refusals print them
+        (``service.pipeline.body.printed_bounds``)."""
 
 
 def check_garment_ids(garments: tuple[str, ...], allowed: list[str], max_garments: int) -> None:
@@ -155,12 +167,15 @@ def model_version(models_dir: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()[:12]
 
 
-def glb_layers(garments, catalog: dict, body: tuple[np.ndarray, np.ndarray] | None):
+def glb_layers(
+    garments, catalog: dict, body: tuple[np.ndarray, np.ndarray] | None, extras: dict | None = None
+):
     """``GltfLayer``s of fitted ``garments`` [(id, vertices (V, 3), faces (F, 3))], each with its catalog
-    look (display mesh and material, when it has one), the body's (vertices, faces) first unless None."""
+    look (display mesh and material, when it has one), the body's (vertices, faces) first unless None,
+    with ``extras`` on its node."""
     from service.pipeline.gltf import GltfLayer
 
-    layers = [GltfLayer("body", *body)] if body is not None else []
+    layers = [GltfLayer("body", *body, extras=extras)] if body is not None else []
     for gid, v, f in garments:
         g = catalog.get(gid)
         layers.append(GltfLayer(gid, v, f, g.display if g else None, g.material if g else None))
@@ -214,39 +229,48 @@ class ModelEngine:
 
         check_garment_ids(spec.garments, self.garment_ids(), MAX_GARMENTS)
         check_order(self.models.refusals(list(spec.garments)))
-        self.beta(spec)
+        self.body(spec)
 
-    def beta(self, spec: OutfitSpec) -> np.ndarray:
-        from service.pipeline.body import ShapeOutOfRange, format_range, shape_from_measurements
+    def body(self, spec: OutfitSpec):
+        """The shopper's ``BuiltBody`` (``service.pipeline.body_build``), kept per process."""
+        from service.pipeline.body import ShapeOutOfRange, format_range
+        from service.pipeline.body_build import BodyRequest
 
+        request = BodyRequest(spec.gender, spec.height_cm, spec.weight_kg,
+                              **{k: getattr(spec, k) for k in GIRTH_FIELDS})
         try:
-            return shape_from_measurements(self.models.body, spec.gender, spec.height_cm, spec.weight_kg)
+            return self.models.bodies.build(request)
         except ShapeOutOfRange as e:
             allowed = "a finite number" if e.allowed is None else format_range(*e.allowed)
             raise InvalidField(f"body.{e.field}", str(e), allowed) from None
 
-    def body_ranges(self, gender: float, height_cm: float | None) -> dict:
-        from service.pipeline.body import printed_bounds, supported_height_range_cm, supported_weight_range_kg
+    def body_ranges(self, gender: float, height_cm: float | None, weight_kg: float | None = None) -> dict:
+        return self.models.bodies.ranges(gender, height_cm, weight_kg)
 
-        body = self.models.body
-        h_lo, h_hi = printed_bounds(*supported_height_range_cm(body, gender))
-        h = (h_lo + h_hi) / 2 if height_cm is None else min(max(height_cm, h_lo), h_hi)
-        weights = printed_bounds(*supported_weight_range_kg(body, gender, h))
-        return {"height_cm": (h_lo, h_hi), "weight_kg": weights, "at_height_cm": h}
+    def make_body(self, spec: OutfitSpec) -> OutfitResult:
+        from service.pipeline.gltf import GltfLayer, outfit_glb
+
+        built = self.body(spec)
+        vertices = self.models.body.shape_vertices(built.shape)
+        layers = [GltfLayer("body", vertices, self.models.body.faces, extras={"body": built.report()})]
+        return OutfitResult(outfit_glb(layers), {"body": built.report()}, layers)
 
     def make(self, spec: OutfitSpec) -> OutfitResult:
         from service.pipeline.gltf import outfit_glb
         from service.pipeline.outfit import make_outfit
 
-        beta = self.beta(spec)
+        built = self.body(spec)
+        beta, body_vertices = built.garment_beta, self.models.body.shape_vertices(built.shape)
         ids = list(spec.garments)
 
         def explicit_outfit():
-            return make_outfit(self.models, ids, beta, untangle_layers=False, measure=False)
+            return make_outfit(self.models, ids, beta, untangle_layers=False, measure=False,
+                               body_vertices=body_vertices)
 
         flagged: list[str] = []
         try:
-            outfit = make_outfit(self.models, ids, beta, spec.untangle, spec.untangler, measure=spec.measure)
+            outfit = make_outfit(self.models, ids, beta, spec.untangle, spec.untangler, measure=spec.measure,
+                                 body_vertices=body_vertices)
         except NUMERICAL_ERRORS as e:
             if not spec.untangle:
                 raise
@@ -258,8 +282,8 @@ class ModelEngine:
             garments, bad = finite_layers(garments, explicit)
             flagged += bad
         body = (outfit.body_vertices, outfit.body_faces) if spec.include_body else None
-        layers = glb_layers(garments, self.models.catalog, body)
-        report = dict(outfit.report)
+        layers = glb_layers(garments, self.models.catalog, body, {"body": built.report()})
+        report = dict(outfit.report) | {"body": built.report()}
         report["numerical_fallback"] = flagged
         report["garments_served"] = [g for g, _, _ in garments]
         return OutfitResult(outfit_glb(layers), report, layers)

@@ -2,18 +2,23 @@
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
 from benchmarks import population as pop
-from service.pipeline.body import BodyModel, ShapeOutOfRange, shape_from_measurements
+from service.pipeline.body import BodyModel, ShapeOutOfRange
+from service.pipeline.body_build import BodyBuilder, BodyRequest
+from service.pipeline.girth_priors import GirthPriors
+from service.pipeline.measurements import landmarks, measure
 
-SUBSET = 40  # first rows of each sex the counting tests ask the service about
+SUBSET = 12  # first rows of each sex the counting tests ask the service about (~0.3 s each)
 
 
 @pytest.fixture(scope="module")
-def body():
-    return BodyModel.load()
+def builder():
+    return BodyBuilder(BodyModel.load(), GirthPriors.load())
 
 
 @pytest.fixture(scope="module")
@@ -27,8 +32,13 @@ def subset(everyone):
 
 
 @pytest.fixture(scope="module")
-def found(body, subset):
-    return {sex: pop.outcomes(body, p) for sex, p in subset.items()}
+def recs(subset):
+    return {sex: pop.records(p, workers=1, cache_dir=None) for sex, p in subset.items()}
+
+
+@pytest.fixture(scope="module")
+def found(recs):
+    return {sex: pop.outcomes_of(r) for sex, r in recs.items()}
 
 
 def cells(rows: list[list[str]]) -> list[list[str]]:
@@ -77,29 +87,49 @@ def test_every_value_lands_in_exactly_one_band():
         assert (member.sum(axis=0) == 1).all()
 
 
-def test_shares_are_a_direct_count_of_the_service(body, subset, found):
+def test_records_are_a_direct_count_of_the_service(builder, subset, recs, found):
+    """Each record is the builder's answer for that adult's height, weight and hip; a served one's
+    errors are the built body's own measurements minus the asked ones."""
+    marks = landmarks(builder.model)
     for sex, p in subset.items():
-        served = [0, 0]
-        for h, w in zip(p.height_cm, p.weight_kg, strict=True):
+        held = pop.held_out(sex, p.rows)
+        for i, r in enumerate(recs[sex]):
+            h, w, hip = p.height_cm[i], p.weight_kg[i], p.columns["BMXHIP"][i]
             try:
-                shape_from_measurements(body, p.gender, h, w)
-                served[0] += 1
+                built = builder.build(BodyRequest(p.gender, h, w, hip_cm=hip))
             except ShapeOutOfRange:
-                served[1] += 1
+                assert r["outcome"] != "served"
+                continue
+            assert r["outcome"] == "served"
+            tape = measure(builder.model.shape_vertices(built.shape), builder.model.faces, marks)
+            assert r["hip_err_cm"] == pytest.approx(tape.hip_cm - hip, abs=1e-9)
+            iliac = tape.waist_iliac_cm - p.columns["BMXWAIST"][i]
+            assert r["iliac_err_cm"] == pytest.approx(iliac, abs=1e-9)
+            assert r["height_err_cm"] == pytest.approx(tape.height_cm - h, abs=1e-9)
+            assert abs(r["hip_err_cm"]) <= 1.0 and abs(r["height_err_cm"]) <= 0.5
+            assert abs(r["weight_err_pct"]) <= 1.0
+            assert ("hip_pred_err_cm" in r) == bool(held[i])
         shares = pop.outcome_shares(found[sex])
-        assert all(0.0 <= s <= 1.0 for s in shares.values())
         assert sum(shares.values()) == pytest.approx(1.0)
-        assert shares["served"] == served[0] / len(p)
-        assert (found[sex] == "served").sum() == served[0] and (found[sex] != "served").sum() == served[1]
-    # the first 40 women and men hold both the served and the too heavy
-    every = np.concatenate(list(found.values()))
-    assert {"served", "too heavy"} <= set(every) <= set(pop.OUTCOMES)
-    assert pop.outcome(body, 1.0, 165.0, 200.0) == "too heavy"
-    assert pop.outcome(body, 1.0, 165.0, 20.0) == "too light"
-    assert pop.outcome(body, 0.0, 120.0, 40.0) == "height"
+    for gender, (h, w, hip), outcome in ((1.0, (165.0, 250.0, 150.0), "too heavy"),
+                                         (0.0, (120.0, 40.0, 80.0), "height"),
+                                         (0.0, (175.0, 70.0, 200.0), "girths")):  # fmt: skip
+        row = {"BMXHT": h, "BMXWT": w, "BMXHIP": hip, "BMXWAIST": hip}
+        assert pop.person_record(builder, gender, row, False)["outcome"] == outcome
 
 
-def test_the_band_tables_count_every_adult_once(subset, found):
+def test_records_resume_from_the_cache(tmp_path, subset):
+    p = subset["female"].subset(np.arange(3))
+    first = pop.records(p, workers=1, cache_dir=tmp_path)
+    (path,) = tmp_path.glob("*/female.json")
+    cached = json.loads(path.read_text())
+    cached["0"]["outcome"] = "marked"  # a rerun reads the cache instead of building again
+    path.write_text(json.dumps(cached))
+    again = pop.records(p, workers=1, cache_dir=tmp_path)
+    assert again[0]["outcome"] == "marked" and again[1:] == first[1:]
+
+
+def test_the_band_tables_count_every_adult_once(subset, found, recs):
     for rows, edges, values in (
         (pop.bmi_rows(subset, found), pop.BMI_EDGES, {s: p.bmi for s, p in subset.items()}),
         (pop.height_rows(subset, found), pop.HEIGHT_EDGES_CM, {s: p.height_cm for s, p in subset.items()}),
@@ -118,58 +148,26 @@ def test_the_band_tables_count_every_adult_once(subset, found):
                     assert r[3:] == ["-"] * len(pop.OUTCOMES)
                     continue
                 percents = [float(c.rstrip(" %")) for c in r[3:]]
-                assert all(0 <= x <= 100 for x in percents)
                 assert percents[0] == round(100 * (found[sex][band == i] == "served").sum() / n)
     overview = cells(pop.overview_rows(subset, found))
     assert [r[0] for r in overview] == ["female", "male", "all"]
-    for r, (sex, p) in zip(overview, subset.items(), strict=False):
-        assert int(r[1]) + int(r[2]) == int(r[3]) == len(p)
-        assert float(r[4].rstrip(" %")) == pytest.approx(100 * (found[sex] == "served").mean(), abs=0.05)
-    assert int(overview[-1][3]) == sum(len(p) for p in subset.values())
+    errors = cells(pop.error_rows(subset, recs))
+    assert all(len(r) == len(pop.ERROR_HEADER) for r in errors)
+    assert sum(int(r[2]) for r in errors) == sum(int((f == "served").sum()) for f in found.values())
+    predictions = cells(pop.prediction_rows(subset, recs))
+    assert all(len(r) == len(pop.PREDICTION_HEADER) for r in predictions)
 
 
-def test_built_bodies_have_the_asked_height_and_weight(body, subset, found):
-    records = {}
-    for sex, p in subset.items():
-        sample = pop.sample_served(p, found[sex], 3)
-        assert len(sample) == min(3, int((found[sex] == "served").sum()))
-        assert np.array_equal(sample.rows, pop.sample_served(p, found[sex], 3).rows)  # seeded
-        assert (found[sex][np.isin(p.rows, sample.rows)] == "served").all()
-        records[sex] = pop.build_sample(body, sample)
-        for r in records[sex]:
-            assert r["build_ms"] > 0 and r["height_err_cm"] < 1e-3 and r["mass_err_kg"] < 1e-3
-    rows = cells(pop.build_rows(records | {"nobody": []}))
-    assert len(rows) == 3 and all(len(r) == len(pop.BUILD_HEADER) for r in rows)
-    assert rows[-1] == ["nobody", "0"] + ["-"] * (len(pop.BUILD_HEADER) - 2)
-
-
-def test_the_benchmark_prints_its_five_tables(capsys):
-    pop.main(["--sample", "1"])
-    out = capsys.readouterr().out
-    titles = [line for line in out.splitlines() if line.startswith("## ")]
-    assert len(titles) == 5 and titles[3].startswith("## Built bodies (1 served")
-    assert titles[-1].startswith("## Girths of the built bodies")
-    rules = [line for line in out.splitlines() if line.startswith("|---|")]
-    assert len(rules) == 5
-    # Every row has as many cells as its header: no "|" inside a cell.
-    for block in out.split("## ")[1:]:
-        table = [line for line in block.splitlines() if line.startswith("|")]
-        assert len({line.count("|") for line in table}) == 1, table[0]
-
-
-def test_girth_errors_are_the_tape_on_the_mesh_minus_nhanes():
-    from service.pipeline.measurements import landmarks, measure
-
-    body = BodyModel.load()
-    people = pop.load("female")
-    found = pop.outcomes(body, people.subset(np.arange(30)))
-    one = pop.sample_served(people.subset(np.arange(30)), found, 1)
-    (record,) = pop.build_sample(body, one)
-    vertices = body.vertices(shape_from_measurements(body, one.gender, one.height_cm[0], one.weight_kg[0]))
-    tape = measure(vertices, body.faces, landmarks(body))
-    assert record["hip_err_cm"] == tape.hip_cm - one.columns["BMXHIP"][0]
-    assert record["waist_iliac_err_cm"] == tape.waist_iliac_cm - one.columns["BMXWAIST"][0]
-    rows = pop.girth_rows({"female": [record], "nobody": []})
-    assert rows[0][:3] == ["female", "1", f"{record['hip_err_cm']:+.1f}"]
-    assert len(rows[0]) == len(pop.GIRTH_HEADER)
-    assert rows[1] == ["nobody", "0"] + ["-"] * (len(pop.GIRTH_HEADER) - 2)
+def test_the_tails_are_held_out_and_disjoint():
+    everyone = pop.load_all()
+    chosen = pop.tail_people(everyone, 4)
+    assert len(chosen) == 12 and len({(s, r) for _, s, r in chosen}) == 12
+    for tail, sex, row in chosen:
+        assert pop.held_out(sex, np.array([row]))[0]
+        p = everyone[sex]
+        if tail == "BMI over 40":
+            assert p.bmi[row] > 40.0
+    shortest = [everyone[s].height_cm[r] for t, s, r in chosen if t == "shortest"]
+    held_heights = np.concatenate([p.height_cm[pop.held_out(s, p.rows)] for s, p in everyone.items()])
+    # the 4 shortest, or the fifth where a heavy one among them was taken first
+    assert max(shortest) <= np.sort(held_heights)[4]

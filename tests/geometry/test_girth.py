@@ -17,6 +17,7 @@ from service.geometry.girth import (
     polyline_length,
     section_loops,
     signed_area,
+    tape_edges,
     tape_girth,
     tape_girths,
     tape_loop,
@@ -195,3 +196,20 @@ def test_a_plane_through_vertices():
     (loop,) = section_loops(v, f, 1.0)  # each ring vertex twice: its vertical and diagonal edges up
     assert sorted(set(map(tuple, np.round(loop, 12)))) == sorted(map(tuple, np.round(ring, 12)))
     assert tape_girth(v, f, 1.0, (0, 0)) == pytest.approx(polyline_length(ring), rel=1e-12)
+
+
+def test_tape_edges_are_the_tape_with_its_mesh_edges():
+    """Each hull corner of ``tape_edges`` is the point ``a + t (b - a)`` of its mesh edge at the level, and
+    the hull is ``tape_loop``'s (a torso with an arm beside it: the arm's loop is left out)."""
+    torso, arm = elliptic_cylinder(0.15, 0.1, n=90), elliptic_cylinder(0.04, 0.04, n=30, centre=(0.3, 0.0))
+    v = np.concatenate([torso[0], arm[0]])
+    v[:, :2] *= 1.0 + 0.1 * np.sin(7.0 * v[:, 2:3])  # not a prism: the edges are slanted
+    f = np.concatenate([torso[1], arm[1] + len(torso[0])])
+    for z, tape in zip((0.13, 0.31), tape_edges(v, f, np.array([0.13, 0.31]), (0.0, 0.0)), strict=True):
+        np.testing.assert_array_equal(tape.points, tape_loop(v, f, z, (0.0, 0.0)))
+        a, b = v[tape.a], v[tape.b]
+        np.testing.assert_allclose(a + tape.t[:, None] * (b - a), np.column_stack(
+            [tape.points, np.full(len(tape.points), z)]), atol=1e-12)
+        assert tape.girth == pytest.approx(tape_girth(v, f, z, (0.0, 0.0)), rel=1e-12)
+    with pytest.raises(ValueError, match="goes around"):
+        tape_edges(v, f, np.array([0.1]), (0.2, 0.0))

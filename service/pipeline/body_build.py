@@ -1,0 +1,240 @@
+"""A shopper's body from what she knows of it: gender, height, weight and any of chest, waist and hip
+girths (issue 55; definitions in ``service.pipeline.measurements``, docs/body.md).
+
+Given measurements are reproduced on the mesh within ``body_fit.TOLERANCE``; missing girths are the
+population's typical value given the others (``girth_priors``), fitted as soft targets (one residual
+unit = the prediction's standard deviation): the hip and chest, and the NHANES waist at the iliac
+crest unless a (natural) waist is given. No survey measures the natural waist, so a missing one is
+whatever the body fitted to the rest has. Refusals (``ShapeOutOfRange``, a 422 naming the field and
+the range possible): a height or BMI outside ``HEIGHT_RANGE_CM`` / ``BMI_RANGE``, a girth outside
+what adults of that height and weight have (``GirthPriors.possible_range``), or a combination the
+body cannot take within the tolerances.
+
+The garment models were trained on the bodies of Anny's unextended (gender, height, weight) box
+(``body.shape_from_measurements``); a garment takes the code of the box body nearest in height and
+weight (``garment_beta``) and follows the shopper's own body through the canonical displacement
+(``canonical.py``), as on any body.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import lru_cache
+
+import numpy as np
+
+from service.pipeline.body import (
+    BodyModel,
+    ShapeOutOfRange,
+    format_range,
+    printed_bounds,
+    shape_from_measurements,
+    supported_height_range_cm,
+    supported_weight_range_kg,
+)
+from service.pipeline.body_fit import GIVEN_SCALE, TOLERANCE, BodyFit, Target, fit_shape
+from service.pipeline.girth_priors import GirthPriors
+from service.pipeline.measurements import BodyMeasurements, Landmarks, landmarks
+
+GIRTHS = ("chest_cm", "waist_cm", "hip_cm")
+# Served heights and BMIs: NHANES 2017-2020 adults span 139-200 cm and BMI 14.2-67.0; issue 55 asks
+# for 140-205 cm; a little room on each side.
+HEIGHT_RANGE_CM = (135.0, 210.0)
+BMI_RANGE = (13.0, 70.0)
+# Bodies kept per process: a shopper tries many outfits on one body (~0.1-1 s each to build, ~0.5 MB).
+BODY_CACHE = 256
+# A rough start for the fit (Anny's height axis: 108.9 cm per unit, women 176.9 cm and men 190.9 cm at
+# 0.5; its weight axis, muscle 0.25: ~26 (women) and ~30 (men) BMI per unit above 0.5 at BMI 22 / 24).
+START = {"female": (176.9, 22.0, 26.0), "male": (190.9, 24.0, 30.0)}
+HEIGHT_CM_PER_UNIT = 108.9
+
+
+@dataclass(frozen=True)
+class BodyRequest:
+    """What a shopper gives: gender (0 male .. 1 female), cm, kg; None for a girth not given."""
+
+    gender: float
+    height_cm: float
+    weight_kg: float
+    chest_cm: float | None = None
+    waist_cm: float | None = None
+    hip_cm: float | None = None
+
+    @property
+    def given(self) -> dict[str, float]:
+        return {g: float(getattr(self, g)) for g in GIRTHS if getattr(self, g) is not None}
+
+
+@dataclass(frozen=True)
+class BuiltBody:
+    """A shopper's body: its extended ``shape (S,)``, the ``garment_beta (3,)`` garments take, what it
+    measures, and the value each predicted girth was fitted to (name -> cm)."""
+
+    shape: np.ndarray
+    garment_beta: np.ndarray
+    measured: BodyMeasurements
+    predicted: dict[str, float]
+    given: tuple[str, ...]
+    fit: BodyFit = field(repr=False)
+
+    def report(self) -> dict:
+        """The body as built, for the JSON report and the GLB (rounded to 0.1 cm / 0.1 kg)."""
+        m = self.measured
+        return {
+            "height_cm": round(m.height_cm, 1),
+            "weight_kg": round(m.weight_kg, 1),
+            "chest_cm": round(m.chest_cm, 1),
+            "waist_cm": round(m.waist_cm, 1),
+            "hip_cm": round(m.hip_cm, 1),
+            "predicted": sorted(g for g in GIRTHS if g not in self.given),
+        }
+
+
+def _number(name: str, value) -> float:
+    try:
+        x = float(value)
+    except (TypeError, ValueError):
+        raise ShapeOutOfRange(name, f"{name}={value!r} is not a number") from None
+    if not np.isfinite(x):
+        raise ShapeOutOfRange(name, f"{name}={x} is not a finite number")
+    return x
+
+
+def check_request(priors: GirthPriors, request: BodyRequest) -> BodyRequest:
+    """The request with its numbers checked, in order (gender, height, weight, then each girth given
+    the others); raises ``ShapeOutOfRange`` naming the first field out of range and what is allowed."""
+    g = _number("gender", request.gender)
+    if not 0.0 <= g <= 1.0:
+        raise ShapeOutOfRange(
+            "gender", f"gender={g:g} is outside the supported range 0-1 (0 male, 1 female)", (0.0, 1.0)
+        )
+    h = _number("height_cm", request.height_cm)
+    if not HEIGHT_RANGE_CM[0] <= h <= HEIGHT_RANGE_CM[1]:
+        raise ShapeOutOfRange(
+            "height_cm",
+            f"height_cm={h:g} is outside the supported range {format_range(*HEIGHT_RANGE_CM)} cm",
+            HEIGHT_RANGE_CM,
+        )
+    w = _number("weight_kg", request.weight_kg)
+    w_range = weight_range_kg(h)
+    if not w_range[0] <= w <= w_range[1]:
+        raise ShapeOutOfRange(
+            "weight_kg",
+            f"weight_kg={w:g} is outside the supported range "
+            f"{format_range(*w_range)} kg for height_cm={h:g} (BMI {BMI_RANGE[0]:g}-"
+            f"{BMI_RANGE[1]:g})",
+            w_range,
+        )
+    girths = {}
+    for name in GIRTHS:
+        value = getattr(request, name)
+        if value is None:
+            continue
+        x = _number(name, value)
+        lo, hi = priors.possible_range(g, name, h, w)
+        if not lo <= x <= hi:
+            raise ShapeOutOfRange(
+                name,
+                f"{name}={x:g} is outside the range {format_range(lo, hi)} cm that adults "
+                f"of height_cm={h:g} and weight_kg={w:g} have",
+                (lo, hi),
+            )
+        girths[name] = x
+    return BodyRequest(g, h, w, **girths)
+
+
+def weight_range_kg(height_cm: float) -> tuple[float, float]:
+    """Weights (kg) served at this height: ``BMI_RANGE`` times the height squared."""
+    return tuple(b * (height_cm / 100.0) ** 2 for b in BMI_RANGE)
+
+
+def targets_of(priors: GirthPriors, request: BodyRequest) -> tuple[dict[str, Target], dict[str, float]]:
+    """The fit's targets (given ones tight, predicted ones soft) and the predicted values (cm)."""
+    given = request.given
+    targets = {
+        "height_cm": Target(request.height_cm, GIVEN_SCALE * TOLERANCE["height_cm"]),
+        "weight_kg": Target(request.weight_kg, GIVEN_SCALE * TOLERANCE["weight_kg"]),
+    }
+    targets |= {g: Target(v, GIVEN_SCALE * TOLERANCE[g]) for g, v in given.items()}
+    predictions = priors.predict(request.gender, request.height_cm, request.weight_kg, given)
+    if "waist_cm" in given:  # the natural waist fixes what the iliac-crest prediction would guess
+        predictions.pop("waist_iliac_cm", None)
+    targets |= {g: Target(p.value_cm, p.sd_cm) for g, p in predictions.items()}
+    return targets, {g: p.value_cm for g, p in predictions.items()}
+
+
+def start_shape(model: BodyModel, request: BodyRequest) -> np.ndarray:
+    """A start for the fit: height and weight phenotypes from linear rules of thumb, no local change."""
+    bmi = request.weight_kg / (request.height_cm / 100.0) ** 2
+    mix = np.array([START["male"], START["female"]])
+    base, bmi0, per = (1.0 - request.gender) * mix[0] + request.gender * mix[1]
+    shape = np.zeros(3 + model.n_local)
+    shape[:3] = (
+        request.gender,
+        0.5 + (request.height_cm - base) / HEIGHT_CM_PER_UNIT,
+        0.5 + (bmi - bmi0) / per,
+    )
+    return shape
+
+
+def garment_beta(model: BodyModel, request: BodyRequest) -> np.ndarray:
+    """beta ``(3,)`` of the box body (``body.shape_from_measurements``) nearest in height, then weight."""
+    lo, hi = supported_height_range_cm(model, request.gender)
+    h = float(np.clip(request.height_cm, lo, hi))
+    w_lo, w_hi = supported_weight_range_kg(model, request.gender, h)
+    return shape_from_measurements(model, request.gender, h, float(np.clip(request.weight_kg, w_lo, w_hi)))
+
+
+def build_body(model: BodyModel, marks: Landmarks, priors: GirthPriors, request: BodyRequest) -> BuiltBody:
+    """The shopper's body (module docstring); raises ``ShapeOutOfRange``."""
+    request = check_request(priors, request)
+    targets, predicted = targets_of(priors, request)
+    given = ("height_cm", "weight_kg", *request.given)
+    fit = fit_shape(model, marks, start_shape(model, request), targets, frozenset(given))
+    if not fit.reproduced:
+        misses = [
+            n
+            for n in given
+            if abs(getattr(fit.measured, n) - targets[n].value)
+            > TOLERANCE[n] * (targets[n].value if n == "weight_kg" else 1.0)
+        ]
+        names = ", ".join(misses)
+        raise ShapeOutOfRange(
+            misses[0],
+            f"no body has {names} together as given ("
+            + ", ".join(f"{n}={targets[n].value:g}" for n in given)
+            + "); closest built: "
+            + ", ".join(f"{n}={getattr(fit.measured, n):.1f}" for n in misses),
+        )
+    return BuiltBody(
+        fit.shape, garment_beta(model, request), fit.measured, predicted, tuple(request.given), fit
+    )
+
+
+class BodyBuilder:
+    """``build_body`` on one body model and its priors, the last ``BODY_CACHE`` bodies kept."""
+
+    def __init__(self, model: BodyModel, priors: GirthPriors):
+        self.model, self.priors = model, priors
+        self.marks = landmarks(model)
+        self.build = lru_cache(maxsize=BODY_CACHE)(self._build)
+
+    def _build(self, request: BodyRequest) -> BuiltBody:
+        return build_body(self.model, self.marks, self.priors, request)
+
+    def ranges(self, gender: float, height_cm: float | None, weight_kg: float | None) -> dict:
+        """What ``check_request`` accepts: heights, the weights at ``height_cm`` (clamped into the
+        heights; their middle when None) and the girths at ``weight_kg`` (clamped likewise), each
+        ``(lo, hi)`` as refusals print it."""
+        g = float(np.clip(gender, 0.0, 1.0))
+        h_lo, h_hi = printed_bounds(*HEIGHT_RANGE_CM)
+        h = (h_lo + h_hi) / 2 if height_cm is None else min(max(height_cm, h_lo), h_hi)
+        w_lo, w_hi = printed_bounds(*weight_range_kg(h))
+        w = (w_lo + w_hi) / 2 if weight_kg is None else min(max(weight_kg, w_lo), w_hi)
+        girths = {name: printed_bounds(*self.priors.possible_range(g, name, h, w)) for name in GIRTHS}
+        return {
+            "height_cm": (h_lo, h_hi),
+            "weight_kg": (w_lo, w_hi),
+            "at_height_cm": h,
+            "at_weight_kg": w,
+        } | girths
