@@ -14,6 +14,9 @@ Levenberg-Marquardt with box bounds (by projection) and exact Jacobians:
   is the 5 mm grid level ``measure`` picked: the outer loop re-measures with ``measure`` (which picks
   the levels again) until every target is within its tolerance or ``OUTER_ROUNDS`` run out.
 
+A tape's level can jump where two heights nearly tie (the rearmost point of a heavy body's
+buttocks): every level ``measure`` has picked is then held to the target together.
+
 ``evaluate`` is the measured values with their Jacobian; ``tests/pipeline/test_body_fit.py`` holds it
 to finite differences and ``fit_shape`` to ``measure``.
 """
@@ -45,7 +48,8 @@ RELATIVE = frozenset({"weight_kg"})
 # on the 120 bodies of decision 0020's sample).
 GIVEN_SCALE = 0.1
 LOCAL_SPREAD = 1.0  # local-change units per residual unit of the ridge (Anny's targets span -1..1)
-OUTER_ROUNDS = 4  # measure() calls: levels picked, carried, picked again (2 suffice for most bodies)
+OUTER_ROUNDS = 5  # measure() calls: levels picked, carried, picked again (2 suffice for most bodies)
+SAME_LEVEL_M = 0.0025  # levels closer than half measure's 5 mm grid step are one level
 INNER_STEPS = 25  # Levenberg-Marquardt steps per round
 STEP_TOLERANCE = 1e-5  # shape units: a smaller step ends the round
 DAMPING = (1e-3, 10.0, 1e8)  # start, factor on a rejected (and 1/factor on an accepted) step, give up
@@ -82,26 +86,29 @@ def carried_levels(vertices: np.ndarray, marks: Landmarks, measured: BodyMeasure
     return levels | {"waist_iliac": marks.iliac}
 
 
+def _add_levels(seen: dict[str, list[Level]], new: dict[str, Level], vertices: np.ndarray) -> None:
+    """Append each new level unless one already seen lies within ``SAME_LEVEL_M`` of it on ``vertices``."""
+    for tape, level in new.items():
+        kept = seen.setdefault(tape, [])
+        if all(abs(k.z(vertices) - level.z(vertices)) > SAME_LEVEL_M for k in kept):
+            kept.append(level)
+
+
 def evaluate(
-    model: BodyModel, marks: Landmarks, shape: np.ndarray, names: tuple[str, ...], levels: dict[str, Level]
+    model: BodyModel, marks: Landmarks, shape: np.ndarray, rows: list[tuple[str, Level | None]]
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Measured values ``(Q,)`` of ``names`` (from ``QUANTITIES``) on the body of ``shape (S,)``, girths
-    at the carried ``levels``, and their Jacobian ``(Q, S)`` w.r.t. the shape."""
+    """Measured values ``(Q,)`` of ``rows`` (a name of ``QUANTITIES`` and, for a girth, the carried level
+    to read it at) on the body of ``shape (S,)``, and their Jacobian ``(Q, S)`` w.r.t. the shape."""
     basis = model.basis  # (K, V, 3)
     u, du = shape_coefficients(shape[None], model.anchors, model.n_local)
     u, du = u[0], du[0]  # (K,), (S, K)
     v = np.einsum("k,kvd->vd", u, basis)
+    girth_levels = [level for name, level in rows if name in TAPE_OF]
+    centre = v[marks.torso, :2].mean(axis=0)
+    zs = np.array([level.z(v) for level in girth_levels])
+    tapes = iter(tape_edges(v, model.faces, zs, centre) if len(zs) else [])
     values, grads = [], []
-    tapes = [TAPE_OF[n] for n in names if n in TAPE_OF]
-    zs = [levels[t].z(v) for t in tapes]
-    edges = (
-        dict(
-            zip(tapes, tape_edges(v, model.faces, np.array(zs), v[marks.torso, :2].mean(axis=0)), strict=True)
-        )
-        if tapes
-        else {}
-    )
-    for name in names:
+    for name, level in rows:
         if name == "height_cm":
             top, bottom = int(np.argmax(v[:, 2])), int(np.argmin(v[:, 2]))
             values.append(100.0 * (v[top, 2] - v[bottom, 2]))
@@ -111,14 +118,18 @@ def evaluate(
             values.append(BODY_DENSITY_KG_M3 * float(tu @ u))
             grads.append(3.0 * BODY_DENSITY_KG_M3 * tu)
         else:
-            tape = TAPE_OF[name]
-            level = levels[tape]
-            value, grad = _girth_and_gradient(
-                basis, v, edges[tape], level.z(v), basis[:, level.vertices, 2].mean(1)
-            )
+            dz = basis[:, level.vertices, 2].mean(axis=1)
+            value, grad = _girth_and_gradient(basis, v, next(tapes), level.z(v), dz)
             values.append(100.0 * value)
             grads.append(100.0 * grad)
     return np.array(values), np.array(grads) @ du.T
+
+
+def measured_rows(names: tuple[str, ...], levels: dict[str, list[Level]]) -> list[tuple[str, Level | None]]:
+    """``evaluate``'s rows: height and weight once, each girth at every level in ``levels[tape]``."""
+    return [(n, None) for n in names if n not in TAPE_OF] + [
+        (n, level) for n in names if n in TAPE_OF for level in levels[TAPE_OF[n]]
+    ]
 
 
 def _girth_and_gradient(basis, v, tape, z, dz):
@@ -148,7 +159,6 @@ def fit_shape(
     """The shape near ``start (S,)`` (its gender is kept) whose body measures ``targets``; ``given`` names
     the targets whose tolerance (``TOLERANCE``) decides ``BodyFit.worst``."""
     names = tuple(n for n in QUANTITIES if n in targets)
-    value, scale = _residual_units(names, targets)
     lo, hi = np.array(SHAPE_BOUNDS[: len(start)]).T
     free = np.arange(1, len(start))
     ridge = np.zeros(len(start))
@@ -156,8 +166,9 @@ def fit_shape(
     shape = np.clip(np.asarray(start, dtype=np.float64), lo, hi)
     steps = 0
 
-    def residuals(x, levels):
-        q, jac = evaluate(model, marks, x, names, levels)
+    def residuals(x, rows):
+        value, scale = _residual_units([n for n, _ in rows], targets)
+        q, jac = evaluate(model, marks, x, rows)
         r = np.concatenate([(q - value) / scale, ridge[free] * x[free]])
         j = np.vstack([jac[:, free] / scale[:, None], np.diag(ridge[free])])
         return r, j
@@ -172,11 +183,17 @@ def fit_shape(
         return max(misses, default=0.0)
 
     measured = measure(model.shape_vertices(shape), model.faces, marks)
+    seen: dict[str, list[Level]] = {}
     for _ in range(OUTER_ROUNDS):
         if worst_of(measured) <= GIVEN_SCALE:
             break
-        levels = carried_levels(model.shape_vertices(shape), marks, measured)
-        shape, taken = _levenberg_marquardt(lambda x, lv=levels: residuals(x, lv), shape, free, lo, hi)
+        # Every level ``measure`` has picked so far is held to the target: where a body's profile has
+        # two near-equal candidates (the buttocks of a heavy body, 2.5 cm apart, 5 cm of girth
+        # between them), measure may pick either, and the fit alone would swing between them.
+        v = model.shape_vertices(shape)
+        _add_levels(seen, carried_levels(v, marks, measured), v)
+        rows = measured_rows(names, seen)
+        shape, taken = _levenberg_marquardt(lambda x, r=rows: residuals(x, r), shape, free, lo, hi)
         steps += taken
         measured = measure(model.shape_vertices(shape), model.faces, marks)
     return BodyFit(shape, measured, worst_of(measured), steps)

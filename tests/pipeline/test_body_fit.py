@@ -23,6 +23,7 @@ from service.pipeline.body_fit import (
     carried_levels,
     evaluate,
     fit_shape,
+    measured_rows,
 )
 from service.pipeline.measurements import landmarks, measure
 
@@ -104,7 +105,9 @@ def test_evaluate_matches_the_mesh_and_finite_differences(body, marks, shape):
     v = body.shape_vertices(shape)
     measured = measure(v, body.faces, marks)
     levels = carried_levels(v, marks, measured)
-    values, jac = evaluate(body, marks, shape, QUANTITIES, levels)
+    rows = measured_rows(QUANTITIES, {tape: [level] for tape, level in levels.items()})
+    values, jac = evaluate(body, marks, shape, rows)
+    assert [n for n, _ in rows] == list(QUANTITIES)
     height_m, mass_kg = body_measurements(v, body.faces)
     np.testing.assert_allclose(values[:2], [100.0 * height_m, mass_kg], rtol=1e-10)
     np.testing.assert_allclose(values[2:], [getattr(measured, q) for q in QUANTITIES[2:]], atol=1e-9)
@@ -112,8 +115,9 @@ def test_evaluate_matches_the_mesh_and_finite_differences(body, marks, shape):
     for k in range(1, len(shape)):
         step = np.zeros(len(shape))
         step[k] = eps
-        fd = (evaluate(body, marks, shape + step, QUANTITIES, levels)[0]
-              - evaluate(body, marks, shape - step, QUANTITIES, levels)[0]) / (2 * eps)  # fmt: skip
+        fd = (evaluate(body, marks, shape + step, rows)[0] - evaluate(body, marks, shape - step, rows)[0]) / (
+            2 * eps
+        )
         assert np.all(np.abs(jac[:, k] - fd) <= 2e-4 * (1.0 + np.abs(fd))), (k, jac[:, k], fd)
 
 
