@@ -27,6 +27,7 @@ test: $(VENV)/.installed-test $(JS_DIR)/node_modules/.installed chromium nginx
 # build/fields); delete them to redo.
 models: $(VENV)/.installed-test
 	$(BIN)/python -m export.body
+	$(BIN)/python -m training.body_priors
 	$(BIN)/python -m export.body_sdf
 	$(BIN)/python -m training.garments
 	$(BIN)/python -m training.drape
@@ -45,6 +46,7 @@ pictures: $(VENV)/.installed-test
 	$(BIN)/python -m training.outfit_pictures
 	$(BIN)/python -m training.collision_pictures
 	$(BIN)/python -m training.measurement_pictures
+	$(BIN)/python -m training.population_pictures
 
 lint: $(VENV)/.installed-dev
 	$(BIN)/ruff check .

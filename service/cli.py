@@ -77,9 +77,43 @@ def cmd_garments(args: argparse.Namespace) -> int:
     return 0
 
 
+GIRTH_OPTIONS = {
+    "chest_cm": "chest (men) or bust (women) girth, ISO 8559-1",
+    "waist_cm": "natural waist girth, ISO 8559-1",
+    "hip_cm": "hip girth at the buttocks, ISO 8559-1",
+}
+BODY_DEFAULTS = {"gender": 0.0, "height_cm": 178.0, "weight_kg": 75.0}
+
+
+def option(name: str) -> str:
+    """``height_cm`` -> ``--height-cm``."""
+    return "--" + name.replace("_", "-")
+
+
+def body_values(args: argparse.Namespace) -> dict[str, float | None]:
+    """The body the options give: gender, height and weight (their defaults where not given) and the
+    girths (None: predicted)."""
+    values = {name: getattr(args, name) for name in (*BODY_DEFAULTS, *GIRTH_OPTIONS)}
+    return values | {name: default for name, default in BODY_DEFAULTS.items() if values[name] is None}
+
+
+def body_problem(args: argparse.Namespace) -> str | None:
+    """What the served range refuses in the body options (``service.pipeline.body_build.check_request``:
+    height, BMI, each girth given the others), found in milliseconds, or None. A combination of girths
+    no body has is found only when the body is built."""
+    from service.pipeline.body import ShapeOutOfRange
+    from service.pipeline.body_build import BodyRequest, check_request
+    from service.pipeline.girth_priors import GirthPriors
+
+    try:
+        check_request(GirthPriors.load(), BodyRequest(**body_values(args)))
+    except ShapeOutOfRange as err:
+        return f"{option(err.field)}: {err}"
+    return None
+
+
 def outfit_input_problem(args: argparse.Namespace, catalog: dict | None) -> str | None:
     """What is wrong with ``ulnef outfit``'s arguments, found before the models load (seconds), or None."""
-    from service.pipeline.body import BodyModel, ShapeOutOfRange, shape_from_measurements
     from service.pipeline.outfit import MAX_GARMENTS
     from service.pipeline.tryon import GARMENT_ID, GARMENT_ID_RULE
 
@@ -97,45 +131,50 @@ def outfit_input_problem(args: argparse.Namespace, catalog: dict | None) -> str 
     output = Path(args.output)
     if not output.parent.is_dir():
         return f"-o {output}: no such directory {output.parent}"
-    try:
-        shape_from_measurements(BodyModel.load(), args.gender, args.height_cm, args.weight_kg)
-    except ShapeOutOfRange as err:
-        return f"--{err.field.replace('_', '-')}: {err}"
-    return None
+    return body_problem(args)
+
+
+def refusal(err) -> str:
+    """An ``InvalidField`` as the CLI names it: ``--height-cm: ...`` for ``body.height_cm``."""
+    return f"{option(err.field.removeprefix('body.'))}: {err}"
 
 
 def cmd_outfit(args: argparse.Namespace) -> int:
-    """Dress a body, write the GLB, print the quality report as JSON."""
-    from service.pipeline.body import ShapeOutOfRange, shape_from_measurements
+    """Dress a body, write the GLB, print the quality report (with ``body``, as built) as JSON."""
     from service.pipeline.catalog import verified_imports
-    from service.pipeline.gltf import outfit_glb
-    from service.pipeline.outfit import OutfitModels, make_outfit
-    from service.pipeline.tryon import glb_layers
+    from service.pipeline.outfit import OutfitModels
+    from service.pipeline.tryon import InvalidField, ModelEngine, OutfitSpec
 
     problem = outfit_input_problem(args, try_load_catalog(Settings()))
     if problem is not None:
         print(f"ulnef outfit: {problem}", file=sys.stderr)
         return 2
     models = OutfitModels.load(threads=args.threads, imported=verified_imports(Settings().garments_dir)[0])
-    ids = [g for g in args.garments.split(",") if g]
+    engine = ModelEngine(models, "cli")
+    spec = OutfitSpec(tuple(g for g in args.garments.split(",") if g), **body_values(args),
+                      untangle=not args.no_untangle, include_body=not args.no_body,
+                      untangler=args.untangler)  # fmt: skip
     try:
-        beta = shape_from_measurements(models.body, args.gender, args.height_cm, args.weight_kg)
-        outfit = make_outfit(models, ids, beta, not args.no_untangle, args.untangler)
-    except (ShapeOutOfRange, ValueError) as err:
+        engine.validate(spec)  # the order, and a combination of girths no body has
+        result = engine.make(spec)
+    except InvalidField as err:
+        print(f"ulnef outfit: {refusal(err)}", file=sys.stderr)
+        return 2
+    except ValueError as err:
         print(f"ulnef outfit: {err}", file=sys.stderr)
         return 2
-    body = None if args.no_body else (outfit.body_vertices, outfit.body_faces)
     try:
-        Path(args.output).write_bytes(outfit_glb(glb_layers(outfit.garments, models.catalog, body)))
+        Path(args.output).write_bytes(result.glb)
     except OSError as e:
         print(f"ulnef outfit: cannot write {args.output}: {e.strerror}", file=sys.stderr)
         return 2
-    print(json.dumps(outfit.report, indent=2))
+    print(json.dumps(result.report, indent=2))
     return 0
 
 
 def cmd_avatar(args: argparse.Namespace) -> int:
-    """Write the avatar a shop drapes its garments on (GLB or OBJ) and its measurements as JSON."""
+    """Write the avatar a shop drapes its garments on (GLB or OBJ) and its measurements as JSON; with
+    any body option, a shopper's body instead (``write_body``)."""
     from service.pipeline.appearance import Material
     from service.pipeline.avatar import SKIN, avatar_info, avatar_obj, mean_avatar
     from service.pipeline.body import BodyModel
@@ -143,6 +182,7 @@ def cmd_avatar(args: argparse.Namespace) -> int:
 
     out = Path(args.output)
     suffix = out.suffix.lower()
+    shopper = any(getattr(args, name) is not None for name in (*BODY_DEFAULTS, *GIRTH_OPTIONS))
     if suffix not in (".glb", ".obj"):
         print(f"ulnef avatar: {out}: the file must end in .glb or .obj", file=sys.stderr)
         return 2
@@ -150,6 +190,8 @@ def cmd_avatar(args: argparse.Namespace) -> int:
         print(f"ulnef avatar: {out}: glTF is in metres by definition; write .obj for --units {args.units}",
               file=sys.stderr)  # fmt: skip
         return 2
+    if shopper:
+        return write_body(args, out)
     avatar = mean_avatar(BodyModel.load())
     info = avatar_info(avatar, args.units, out.name)
     try:
@@ -164,6 +206,39 @@ def cmd_avatar(args: argparse.Namespace) -> int:
         print(f"ulnef avatar: cannot write {out}: {e.strerror}", file=sys.stderr)
         return 2
     print(json.dumps(info, indent=2))
+    return 0
+
+
+def write_body(args: argparse.Namespace, out: Path) -> int:
+    """A shopper's body (``service.pipeline.body_build``, as POST /v1/bodies builds it) to ``out``
+    (.glb: one node ``body``, its measurements as glTF extras); prints ``{"body": ...}``."""
+    from service.pipeline.body import BodyModel, ShapeOutOfRange
+    from service.pipeline.body_build import BodyBuilder, BodyRequest
+    from service.pipeline.girth_priors import GirthPriors
+    from service.pipeline.gltf import GltfLayer, outfit_glb
+
+    if out.suffix.lower() != ".glb":
+        print(f"ulnef avatar: {out}: a shopper's body is written as .glb", file=sys.stderr)
+        return 2
+    problem = body_problem(args)
+    if problem is not None:
+        print(f"ulnef avatar: {problem}", file=sys.stderr)
+        return 2
+    model = BodyModel.load()
+    try:
+        built = BodyBuilder(model, GirthPriors.load()).build(BodyRequest(**body_values(args)))
+    except ShapeOutOfRange as err:
+        print(f"ulnef avatar: {option(err.field)}: {err}", file=sys.stderr)
+        return 2
+    report = {"body": built.report()}
+    layer = GltfLayer("body", model.shape_vertices(built.shape), model.faces, extras=report)
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_bytes(outfit_glb([layer]))
+    except OSError as e:
+        print(f"ulnef avatar: cannot write {out}: {e.strerror}", file=sys.stderr)
+        return 2
+    print(json.dumps(report, indent=2))
     return 0
 
 
@@ -187,6 +262,16 @@ def positive_int(text: str) -> int:
     return value
 
 
+def add_body_options(parser: argparse.ArgumentParser) -> None:
+    """Gender, height, weight and the girths (``ulnef outfit``, ``ulnef avatar``): unset is None, the
+    defaults of ``BODY_DEFAULTS`` (or predicted, for a girth) are filled in by ``body_values``."""
+    parser.add_argument("--gender", type=float, help="0 male .. 1 female (default: 0)")
+    parser.add_argument("--height-cm", type=float, help="135-210 (default: 178)")
+    parser.add_argument("--weight-kg", type=float, help="BMI 13-70 at the height (default: 75)")
+    for name, what in GIRTH_OPTIONS.items():
+        parser.add_argument(option(name), type=float, help=f"{what}, cm (default: predicted from the rest)")
+
+
 def build_parser() -> argparse.ArgumentParser:
     defaults = Settings()
     parser = argparse.ArgumentParser(prog="ulnef", description="ULNeF virtual try-on service.")
@@ -205,9 +290,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     outfit = sub.add_parser("outfit", help="dress a body in garments (inner to outer) and write a GLB")
     outfit.add_argument("--garments", required=True, help="comma-separated ids, inner to outer")
-    outfit.add_argument("--gender", type=float, default=0.0, help="0 male .. 1 female (default: %(default)s)")
-    outfit.add_argument("--height-cm", type=float, default=178.0, help="(default: %(default)s)")
-    outfit.add_argument("--weight-kg", type=float, default=75.0, help="(default: %(default)s)")
+    add_body_options(outfit)
     outfit.add_argument("--untangler", choices=("neural", "reference"), default="neural")
     outfit.add_argument("--no-untangle", action="store_true", help="explicit meshes only (tangled)")
     outfit.add_argument("--no-body", action="store_true", help="leave the body out of the GLB")
@@ -216,9 +299,13 @@ def build_parser() -> argparse.ArgumentParser:
     outfit.add_argument("-o", "--output", default="outfit.glb", help="GLB path (default: %(default)s)")
     outfit.set_defaults(func=cmd_outfit)
 
-    avatar = sub.add_parser("avatar", help="write the avatar to drape garments on (GLB or OBJ) and its JSON")
+    avatar = sub.add_parser(
+        "avatar", help="write the avatar to drape garments on (GLB or OBJ) and its JSON; with body options, "
+        "a shopper's body (GLB) and its measurements",
+    )  # fmt: skip
     avatar.add_argument("-o", "--output", default="avatar.glb", help=".glb or .obj (default: %(default)s)")
     avatar.add_argument("--units", choices=("m", "cm", "mm"), default="m", help="(default: %(default)s)")
+    add_body_options(avatar)
     avatar.set_defaults(func=cmd_avatar)
 
     openapi = sub.add_parser("openapi", help="write the HTTP API's OpenAPI schema as YAML")

@@ -8,6 +8,7 @@ External tools skip their tests on a developer machine that lacks them, but fail
 from __future__ import annotations
 
 import contextlib
+import math
 import os
 import shutil
 import signal
@@ -26,8 +27,8 @@ import pytest
 import uvicorn
 
 from service.pipeline.catalog import Garment
-from service.pipeline.gltf import outfit_glb
-from service.pipeline.tryon import InvalidField, OutfitResult, OutfitSpec, check_garment_ids
+from service.pipeline.gltf import GltfLayer, outfit_glb
+from service.pipeline.tryon import GIRTH_FIELDS, InvalidField, OutfitResult, OutfitSpec, check_garment_ids
 
 REPO = Path(__file__).resolve().parents[1]
 JS_DIR = Path(__file__).parent / "js"
@@ -67,10 +68,34 @@ def run_node(script: str, *args: str, timeout: float = 300, env: dict | None = N
     return proc.stdout
 
 
+FAKE_HEIGHTS_CM = (135.0, 210.0)
+FAKE_BMI = (13.0, 70.0)
+# Fake girths at (height cm, weight kg): possible range lo = a h + b w, hi = c h + d w, and the value
+# "predicted" when not given, e h + f w.
+FAKE_GIRTHS = {"chest_cm": (0.3, 0.2, 0.4, 0.6, 0.35, 0.45), "waist_cm": (0.25, 0.15, 0.35, 0.6, 0.3, 0.35),
+               "hip_cm": (0.3, 0.2, 0.4, 0.6, 0.4, 0.4)}  # fmt: skip
+# A waist this much over the hip (both given) is a combination no fake body has.
+FAKE_WAIST_OVER_HIP_CM = 30.0
+FAKE_BODY = (np.array([[0, 0, 0], [0.2, 0, 0], [0, 0, 1.7], [0, 0.2, 0]], dtype=np.float64),
+             np.array([[0, 1, 2], [0, 2, 3], [0, 3, 1], [1, 3, 2]]))  # fmt: skip
+
+
+def inwards(lo: float, hi: float) -> tuple[float, float]:
+    """``(lo, hi)`` rounded inwards to 0.1, as the real refusals print bounds."""
+    return math.ceil(round(lo * 10, 6)) / 10, math.floor(round(hi * 10, 6)) / 10
+
+
+def fake_range(name: str, height_cm: float, weight_kg: float) -> tuple[float, float]:
+    a, b, c, d, _, _ = FAKE_GIRTHS[name]
+    return inwards(a * height_cm + b * weight_kg, c * height_cm + d * weight_kg)
+
+
 class FakeEngine:
     """An ``Engine`` over a small catalog: the catalog's rest meshes on a dummy body, in
-    ``delay`` seconds. A body taller than 200 cm is refused for gender above 0.5, as the real body
-    model refuses some heights for some genders.
+    ``delay`` seconds. Bodies follow the real rules with made-up numbers: heights 135-210 cm, BMI
+    13-70, each girth within a range linear in height and weight (``FAKE_GIRTHS``; refused outside
+    it with the real message), missing girths "predicted" likewise, and a waist 30 cm over the hip is
+    a combination no body has.
 
     ``release``: each outfit waits until the test sets this event (a worker busy for exactly as long
     as the test wants, where a ``delay`` would race the machine's load); ``started`` is set when an
@@ -96,23 +121,68 @@ class FakeEngine:
 
     def validate(self, spec: OutfitSpec) -> None:
         check_garment_ids(spec.garments, self.garment_ids(), 4)
-        if spec.gender > 0.5 and spec.height_cm > 200:
-            raise InvalidField("body.height_cm", f"height_cm={spec.height_cm:g} is too tall", "135.6-200.8")
+        self.body_report(spec)
 
-    def make(self, spec: OutfitSpec) -> OutfitResult:
+    def body_report(self, spec: OutfitSpec) -> dict:
+        """The fake body's ``report["body"]``; raises ``InvalidField`` as the real engine would."""
+        h, w = spec.height_cm, spec.weight_kg
+        if not FAKE_HEIGHTS_CM[0] <= h <= FAKE_HEIGHTS_CM[1]:
+            raise InvalidField("body.height_cm", f"height_cm={h:g} is outside the supported range "
+                               "135.0-210.0 cm", "135.0-210.0")  # fmt: skip
+        w_lo, w_hi = inwards(*(bmi * (h / 100) ** 2 for bmi in FAKE_BMI))
+        if not w_lo <= w <= w_hi:
+            allowed = f"{w_lo:.1f}-{w_hi:.1f}"
+            raise InvalidField("body.weight_kg", f"weight_kg={w:g} is outside the supported range {allowed} "
+                               f"kg for height_cm={h:g} (BMI 13-70)", allowed)  # fmt: skip
+        given = {name: getattr(spec, name) for name in GIRTH_FIELDS if getattr(spec, name) is not None}
+        for name, value in given.items():
+            lo, hi = fake_range(name, h, w)
+            if not lo <= value <= hi:
+                allowed = f"{lo:.1f}-{hi:.1f}"
+                message = (f"{name}={value:g} is outside the range {allowed} cm that adults of "
+                           f"height_cm={h:g} and weight_kg={w:g} have")  # fmt: skip
+                raise InvalidField(f"body.{name}", message, allowed)
+        waist, hip = given.get("waist_cm"), given.get("hip_cm")
+        if waist is not None and hip is not None and waist > hip + FAKE_WAIST_OVER_HIP_CM:
+            raise InvalidField("body.waist_cm", f"no body has waist_cm, hip_cm together as given (waist_cm="
+                               f"{waist:g}, hip_cm={hip:g})", "a combination a body has")  # fmt: skip
+        girths = {name: given.get(name, FAKE_GIRTHS[name][4] * h + FAKE_GIRTHS[name][5] * w)
+                  for name in GIRTH_FIELDS}  # fmt: skip
+        return {"height_cm": round(h, 1), "weight_kg": round(w, 1),
+                **{name: round(value, 1) for name, value in girths.items()},
+                "predicted": sorted(set(GIRTH_FIELDS) - set(given))}  # fmt: skip
+
+    def body_ranges(self, gender: float, height_cm: float | None, weight_kg: float | None = None) -> dict:
+        lo, hi = FAKE_HEIGHTS_CM
+        h = (lo + hi) / 2 if height_cm is None else min(max(height_cm, lo), hi)
+        w_lo, w_hi = inwards(*(bmi * (h / 100) ** 2 for bmi in FAKE_BMI))
+        w = (w_lo + w_hi) / 2 if weight_kg is None else min(max(weight_kg, w_lo), w_hi)
+        return {"height_cm": FAKE_HEIGHTS_CM, "weight_kg": (w_lo, w_hi), "at_height_cm": h, "at_weight_kg": w,
+                **{name: fake_range(name, h, w) for name in GIRTH_FIELDS}}  # fmt: skip
+
+    def _wait(self) -> None:
         with self._lock:
             self.calls += 1
         self.started.set()
         if self.release is not None:
             assert self.release.wait(60), "the test never released the fake engine"
         time.sleep(self.delay)
+
+    def make_body(self, spec: OutfitSpec) -> OutfitResult:
+        body = self.body_report(spec)
+        self._wait()
+        layers = [GltfLayer("body", *FAKE_BODY, extras={"body": body})]
+        return OutfitResult(outfit_glb(layers), {"body": body}, layers)
+
+    def make(self, spec: OutfitSpec) -> OutfitResult:
+        body = self.body_report(spec)
+        self._wait()
         layers = [(g, self.catalog[g].vertices, self.catalog[g].faces) for g in spec.garments]
         if spec.include_body:
-            body = np.array([[0, 0, 0], [0.2, 0, 0], [0, 0, 1.7], [0, 0.2, 0]], dtype=np.float64)
-            layers.insert(0, ("body", body, np.array([[0, 1, 2], [0, 2, 3], [0, 3, 1], [1, 3, 2]])))
+            layers.insert(0, GltfLayer("body", *FAKE_BODY, extras={"body": body}))
         report = {"garments": list(spec.garments), "numerical_fallback": [],
                   "collision_free": self.crossings == 0, "crossing_pairs": self.crossings,
-                  "seconds": {"body": 0.0, "total": self.delay}}  # fmt: skip
+                  "seconds": {"body": 0.0, "total": self.delay}, "body": body}  # fmt: skip
         return OutfitResult(outfit_glb(layers), report, layers)
 
 

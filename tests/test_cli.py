@@ -94,8 +94,15 @@ def no_model_loading(monkeypatch: pytest.MonkeyPatch):
         (["--garments", "tshirt,tshirt"], "--garments: each id at most once, got ['tshirt', 'tshirt']"),
         (["--garments", "tshirt", "-o", "/nonexistent-dir/x.glb"], "-o /nonexistent-dir/x.glb: no such "
          "directory /nonexistent-dir"),
-        (["--garments", "tshirt", "--gender", "1", "--height-cm", "135.6"], "--height-cm: height_cm=135.6 is "
-         "outside the supported range 135.7-200.8 cm for gender=1"),
+        (["--garments", "tshirt", "--gender", "1", "--height-cm", "134.9"], "--height-cm: height_cm=134.9 is "
+         "outside the supported range 135.0-210.0 cm"),
+        (["--garments", "tshirt", "--height-cm", "150", "--weight-kg", "300"],
+         "--weight-kg: weight_kg=300 is outside the supported range 29.3-157.5 kg for height_cm=150 "
+         "(BMI 13-70)"),
+        (["--garments", "tshirt", "--gender", "1", "--height-cm", "165", "--weight-kg", "60",
+          "--hip-cm", "300"], "--hip-cm: hip_cm=300 is outside the range "),
+        (["--garments", "tshirt", "--chest-cm", "nan"], "--chest-cm: chest_cm=nan is not a finite number"),
+        (["--garments", "tshirt", "--waist-cm", "-70"], "--waist-cm: waist_cm=-70 is outside the range "),
         (["--garments", "tshirt", "--gender", "2"], "--gender: gender=2 is outside the supported range 0-1 "
          "(0 male, 1 female)"),
         (["--garments", "tshirt", "--weight-kg", "nan"], "--weight-kg: weight_kg=nan is not a finite number"),
@@ -116,6 +123,8 @@ def test_outfit_bad_input_exits_2_naming_it(argv, message, no_model_loading, tmp
          "argument --height-cm: invalid float value"),
         (["outfit"], "the following arguments are required: --garments"),
         (["avatar", "--units", "inch"], "argument --units: invalid choice: 'inch'"),
+        (["outfit", "--garments", "tshirt", "--hip-cm", "wide"], "argument --hip-cm: invalid float value"),
+        (["avatar", "--chest-cm", "broad"], "argument --chest-cm: invalid float value"),
         (["garments", "--csv"], "unrecognized arguments: --csv"),
     ],
 )  # fmt: skip
@@ -137,3 +146,47 @@ def test_avatar_bad_output_exits_2(name, message, tmp_path, capsys):
         (tmp_path / "missing").write_text("a file where the directory should be")
     assert main(["avatar", "-o", str(target)]) == 2
     assert message in capsys.readouterr().err
+
+
+# ---------------------------------------------------------------- a shopper's body: ulnef avatar --hip-cm ...
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--height-cm", "170", "-o", "body.obj"], "body.obj: a shopper's body is written as .glb"),
+        (["--gender", "1", "--height-cm", "165", "--weight-kg", "60", "--hip-cm", "300"],
+         "--hip-cm: hip_cm=300 is outside the range "),
+        (["--gender", "1", "--height-cm", "165", "--weight-kg", "60", "--waist-cm", "100", "--hip-cm", "72"],
+         "--waist-cm: no body has waist_cm, hip_cm together as given"),
+        (["--weight-kg", "20"], "--weight-kg: weight_kg=20 is outside the supported range 41.2-221.7 kg for "
+         "height_cm=178 (BMI 13-70)"),
+    ],
+)  # fmt: skip
+def test_avatar_refuses_a_body_out_of_range_with_exit_2(argv, message, tmp_path, capsys):
+    argv = (
+        ["-o", str(tmp_path / "body.glb"), *argv]
+        if "-o" not in argv
+        else [a if a != "body.obj" else str(tmp_path / a) for a in argv]
+    )
+    assert main(["avatar", *argv]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("ulnef avatar: ") and message in err, err
+    assert not list(tmp_path.iterdir())
+
+
+def test_avatar_writes_a_shoppers_body_and_prints_its_measurements(tmp_path, capsys):
+    """The body POST /v1/bodies makes: given values reproduced (issue 55's tolerances), the rest
+    predicted, the same measurements on the GLB's body node."""
+    from tests.server.test_api_bodies import body_node
+
+    target = tmp_path / "shopper.glb"
+    assert main(["avatar", "--gender", "1", "--height-cm", "165", "--weight-kg", "60", "--hip-cm", "100",
+                 "-o", str(target)]) == 0  # fmt: skip
+    report = json.loads(capsys.readouterr().out)
+    body = report["body"]
+    assert body["predicted"] == ["chest_cm", "waist_cm"]
+    assert abs(body["height_cm"] - 165) <= 0.5 and abs(body["weight_kg"] - 60) <= 0.6
+    assert abs(body["hip_cm"] - 100) <= 1.0
+    assert body_node(target.read_bytes())["extras"] == report
+    assert not target.with_suffix(".json").exists()  # avatar.json is the mean avatar's, for garment import

@@ -66,7 +66,8 @@ EXAMPLES = examples()
 
 def test_the_readme_has_curl_examples_of_every_outfit_endpoint():
     text = "\n".join(script for _, _, script, _ in EXAMPLES)
-    for needed in ("/v1/outfits ", "/v1/outfits.glb", "/v1/garments", "/readyz", "/openapi.yaml", "Bearer"):
+    paths = ("/v1/outfits ", "/v1/outfits.glb", "/v1/bodies ", "/v1/garments", "/readyz", "/openapi.yaml")
+    for needed in (*paths, "Bearer"):
         assert needed in text, f"no README curl example of {needed}"
 
 

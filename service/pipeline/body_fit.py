@@ -51,6 +51,9 @@ LOCAL_SPREAD = 1.0  # local-change units per residual unit of the ridge (Anny's 
 OUTER_ROUNDS = 5  # measure() calls: levels picked, carried, picked again (2 suffice for most bodies)
 SAME_LEVEL_M = 0.0025  # levels closer than half measure's 5 mm grid step are one level
 INNER_STEPS = 25  # Levenberg-Marquardt steps per round
+# Residual evaluations (~5-15 ms each on 2 busy cores) one fit may spend by default (``body_build``
+# sets its own budget): an impossible combination spends all of it and is refused.
+MAX_EVALUATIONS = 150
 STEP_TOLERANCE = 1e-5  # shape units: a smaller step ends the round
 DAMPING = (1e-3, 10.0, 1e8)  # start, factor on a rejected (and 1/factor on an accepted) step, give up
 
@@ -67,12 +70,12 @@ class Target:
 @dataclass(frozen=True)
 class BodyFit:
     """The fitted extended shape ``(S,)``, its measurements, the largest given-target miss in units of
-    its tolerance (<= 1 is reproduced) and the Levenberg-Marquardt steps taken."""
+    its tolerance (<= 1 is reproduced) and the residual evaluations spent."""
 
     shape: np.ndarray
     measured: BodyMeasurements
     worst: float
-    steps: int
+    evaluations: int
 
     @property
     def reproduced(self) -> bool:
@@ -154,17 +157,23 @@ def _residual_units(names, targets):
 
 
 def fit_shape(
-    model: BodyModel, marks: Landmarks, start: np.ndarray, targets: dict[str, Target], given: frozenset[str]
+    model: BodyModel,
+    marks: Landmarks,
+    start: np.ndarray,
+    targets: dict[str, Target],
+    given: frozenset[str],
+    evaluations: int = MAX_EVALUATIONS,
 ) -> BodyFit:
     """The shape near ``start (S,)`` (its gender is kept) whose body measures ``targets``; ``given`` names
-    the targets whose tolerance (``TOLERANCE``) decides ``BodyFit.worst``."""
+    the targets whose tolerance (``TOLERANCE``) decides ``BodyFit.worst``; at most ``evaluations``
+    residual evaluations are spent."""
     names = tuple(n for n in QUANTITIES if n in targets)
     lo, hi = np.array(SHAPE_BOUNDS[: len(start)]).T
     free = np.arange(1, len(start))
     ridge = np.zeros(len(start))
     ridge[3:] = 1.0 / LOCAL_SPREAD
     shape = np.clip(np.asarray(start, dtype=np.float64), lo, hi)
-    steps = 0
+    spent = 0
 
     def residuals(x, rows):
         value, scale = _residual_units([n for n, _ in rows], targets)
@@ -184,8 +193,9 @@ def fit_shape(
 
     measured = measure(model.shape_vertices(shape), model.faces, marks)
     seen: dict[str, list[Level]] = {}
-    for _ in range(OUTER_ROUNDS):
-        if worst_of(measured) <= GIVEN_SCALE:
+    for round_ in range(OUTER_ROUNDS):
+        # The first round always runs (the soft targets are not met by a start that meets the given ones).
+        if (round_ and worst_of(measured) <= GIVEN_SCALE) or spent >= evaluations:
             break
         # Every level ``measure`` has picked so far is held to the target: where a body's profile has
         # two near-equal candidates (the buttocks of a heavy body, 2.5 cm apart, 5 cm of girth
@@ -193,23 +203,29 @@ def fit_shape(
         v = model.shape_vertices(shape)
         _add_levels(seen, carried_levels(v, marks, measured), v)
         rows = measured_rows(names, seen)
-        shape, taken = _levenberg_marquardt(lambda x, r=rows: residuals(x, r), shape, free, lo, hi)
-        steps += taken
+        shape, taken = _levenberg_marquardt(
+            lambda x, r=rows: residuals(x, r), shape, free, lo, hi, evaluations - spent
+        )
+        spent += taken
         measured = measure(model.shape_vertices(shape), model.faces, marks)
-    return BodyFit(shape, measured, worst_of(measured), steps)
+    return BodyFit(shape, measured, worst_of(measured), spent)
 
 
-def _levenberg_marquardt(residuals, x, free, lo, hi) -> tuple[np.ndarray, int]:
-    """Minimise ``|r(x)|^2`` over ``x[free]`` within ``[lo, hi]``; returns x and the steps taken."""
+def _levenberg_marquardt(residuals, x, free, lo, hi, evaluations: int) -> tuple[np.ndarray, int]:
+    """Minimise ``|r(x)|^2`` over ``x[free]`` within ``[lo, hi]`` with at most ``evaluations`` calls of
+    ``residuals``; returns x and the calls spent."""
     damping, factor, give_up = DAMPING
     r, j = residuals(x)
-    cost = float(r @ r)
-    for step in range(1, INNER_STEPS + 1):
+    cost, spent = float(r @ r), 1
+    for _ in range(INNER_STEPS):
         jtj, g = j.T @ j, j.T @ r
         while True:
+            if spent >= evaluations:
+                return x, spent
             delta = np.linalg.solve(jtj + damping * np.diag(np.diag(jtj) + 1e-12), -g)
             trial = x.copy()
             trial[free] = np.clip(x[free] + delta, lo[free], hi[free])
+            spent += 1
             try:
                 r_new, j_new = residuals(trial)
             except ValueError:  # a section or landmark lost on the way: a smaller step
@@ -221,7 +237,7 @@ def _levenberg_marquardt(residuals, x, free, lo, hi) -> tuple[np.ndarray, int]:
                 break
             damping *= factor
             if damping > give_up:
-                return x, step
+                return x, spent
         if moved < STEP_TOLERANCE:
-            return x, step
-    return x, INNER_STEPS
+            return x, spent
+    return x, spent

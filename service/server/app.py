@@ -15,7 +15,7 @@ from fastapi.routing import APIRoute
 
 from service.server import errors, logs
 from service.server.middleware import AccessLog, BodyLimit, GzipJson
-from service.server.routes import admin, body, garments, outfits, page, probes
+from service.server.routes import admin, bodies, body, garments, outfits, page, probes
 from service.server.routes.garments import CATALOG_NOT_LOADED, try_load_catalog
 from service.server.runtime import EngineFactory, TryOn, load_engine
 from service.server.settings import Settings
@@ -84,7 +84,7 @@ def create_app(settings: Settings | None = None, engine_factory: EngineFactory =
         app.add_middleware(
             CORSMiddleware, allow_origins=settings.cors_origins, allow_methods=["GET", "POST"],
             allow_headers=["Content-Type", "Accept", "Authorization", "If-None-Match"],
-            expose_headers=["X-Outfit-Id", "Content-Location", "ETag", "Retry-After"],
+            expose_headers=["X-Outfit-Id", "X-Body-Id", "Content-Location", "ETag", "Retry-After"],
         )  # fmt: skip
     app.add_middleware(GzipJson)
     app.add_middleware(BodyLimit, max_bytes=settings.max_body_bytes)
@@ -92,6 +92,7 @@ def create_app(settings: Settings | None = None, engine_factory: EngineFactory =
     app.include_router(probes.router)
     app.include_router(garments.router)
     app.include_router(outfits.router)
+    app.include_router(bodies.router)
     app.include_router(body.router)
     app.include_router(admin.router)
     app.include_router(page.router)

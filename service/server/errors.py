@@ -18,7 +18,7 @@ from starlette.exceptions import HTTPException
 from service.pipeline.tryon import GARMENT_ID_RULE, InvalidField
 from service.server import outfit_url
 from service.server.runtime import NotReady
-from service.server.schemas import ALLOWED
+from service.server.schemas import ALLOWED, BODY_ALLOWED
 from service.server.worker import DeadlineExceeded, Overloaded
 
 NOT_READY_RETRY_S = 5
@@ -41,17 +41,23 @@ def _field_path(loc: tuple) -> str:
     return ".".join(parts)
 
 
-def _allowed(path: str, extra: bool) -> str:
-    """The ALLOWED entry for a field path: list indices dropped, an unknown field answered by its
+def _allowed(path: str, extra: bool, allowed: dict[str, str]) -> str:
+    """The ``allowed`` entry for a field path: list indices dropped, an unknown field answered by its
     parent's entry (which lists the known fields)."""
     key = re.sub(r"\.\d+", "", path)
     if extra:
         key = key.rpartition(".")[0]
-    return ALLOWED.get(key, "see openapi.yaml")
+    return allowed.get(key, "see openapi.yaml")
 
 
-def field_errors(errors: list[dict], garment_ids: list[str]) -> list[dict]:
-    """pydantic/FastAPI error dicts -> ``[{"field", "message", "allowed"}]``."""
+def allowed_for(url_path: str) -> dict[str, str]:
+    """What each field accepts on the route of ``url_path``: the bodies' routes have fewer fields."""
+    return ALLOWED | BODY_ALLOWED if url_path.startswith("/v1/bodies") else ALLOWED
+
+
+def field_errors(errors: list[dict], garment_ids: list[str], allowed: dict[str, str] = ALLOWED) -> list[dict]:
+    """pydantic/FastAPI error dicts -> ``[{"field", "message", "allowed"}]``, ``allowed`` as the route
+    takes it (``allowed_for``)."""
     out = []
     for e in errors:
         path = _field_path(tuple(e.get("loc", ())))
@@ -66,10 +72,11 @@ def field_errors(errors: list[dict], garment_ids: list[str]) -> list[dict]:
             message = f"unknown garment id {e.get('input')!r} (ids are {GARMENT_ID_RULE})"
         else:
             message = outfit_url.message(e)
-        allowed = _allowed(path, kind == "extra_forbidden")
-        if path.startswith("garments") and garment_ids:
-            allowed += ": " + ", ".join(garment_ids)
-        out.append({"field": path or "(request body)", "message": message, "allowed": allowed})
+        extra = kind == "extra_forbidden"
+        accepts = _allowed(path, extra, allowed)
+        if path.startswith("garments") and garment_ids and not extra:  # not a field the route lacks
+            accepts += ": " + ", ".join(garment_ids)
+        out.append({"field": path or "(request body)", "message": message, "allowed": accepts})
     return out
 
 
@@ -80,7 +87,7 @@ def _summary(errors: list[dict]) -> str:
 def install(app: FastAPI, garment_ids: Callable[[], list[str]]) -> None:
     @app.exception_handler(RequestValidationError)
     async def invalid_request(request: Request, exc: RequestValidationError) -> JSONResponse:
-        errors = field_errors(list(exc.errors()), garment_ids())
+        errors = field_errors(list(exc.errors()), garment_ids(), allowed_for(request.url.path))
         return JSONResponse({"detail": _summary(errors), "errors": errors}, status_code=422)
 
     @app.exception_handler(HTTPException)
@@ -89,13 +96,13 @@ def install(app: FastAPI, garment_ids: Callable[[], list[str]]) -> None:
         # malformed JSON, so every bad body is a 422 that says what is allowed.
         if exc.status_code == 400:
             errors = [{"field": "(request body)", "message": "malformed JSON (not UTF-8 text)",
-                       "allowed": ALLOWED[""]}]  # fmt: skip
+                       "allowed": allowed_for(request.url.path)[""]}]  # fmt: skip
             return JSONResponse({"detail": _summary(errors), "errors": errors}, status_code=422)
         return await http_exception_handler(request, exc)
 
     @app.exception_handler(outfit_url.QueryInvalid)
     async def invalid_query(request: Request, exc: outfit_url.QueryInvalid) -> JSONResponse:
-        errors = field_errors(exc.errors, garment_ids())
+        errors = field_errors(exc.errors, garment_ids(), allowed_for(request.url.path))
         return JSONResponse({"detail": _summary(errors), "errors": errors}, status_code=422)
 
     @app.exception_handler(InvalidField)

@@ -13,7 +13,12 @@ let a viewer that cannot send ``Authorization`` (``<model-viewer src=...>``) fet
 request counts against key ``k``'s rate limit (``service.server.access``).
 
 Query parameters: the POST's fields by their last name (``height_cm``, not ``body.height_cm``);
-``garments`` comma-separated, booleans ``true``/``false``. Defaults are left out of the URLs made here.
+``garments`` comma-separated, booleans ``true``/``false``. Defaults are left out of the URLs made here,
+and so are the girths not given (``chest_cm``, ``waist_cm``, ``hip_cm``: predicted).
+
+A body alone (POST /v1/bodies) has the same kind of URL, ``/v1/bodies.glb?height_cm=165&...&v=VER``
+(``BODIES``): the body's fields and ``compression`` only. Its signature covers the same canonical text,
+which names no garment: no outfit's URL (one garment or more) can carry a body's signature.
 """
 
 from __future__ import annotations
@@ -23,27 +28,41 @@ from dataclasses import dataclass
 from hashlib import sha256
 from urllib.parse import urlencode
 
-from pydantic import ValidationError
+from pydantic import BaseModel, ValidationError
 
-from service.pipeline.tryon import OutfitSpec
-from service.server.schemas import OutfitOptions, OutfitRequest
+from service.pipeline.tryon import GIRTH_FIELDS, OutfitSpec
+from service.server.schemas import BodyRequest, OutfitOptions, OutfitRequest
 
 PATH = "/v1/outfits.glb"
+BODY_PATH = "/v1/bodies.glb"
+BODY_NUMBERS = ("gender", "height_cm", "weight_kg", *GIRTH_FIELDS)
 # query parameter -> the POST field it stands for (its ``ALLOWED`` entry and its place in the body)
+BODY_FIELDS = {name: f"body.{name}" for name in BODY_NUMBERS} | {"compression": "options.compression"}
 FIELDS = {
     "garments": "garments",
-    "gender": "body.gender",
-    "height_cm": "body.height_cm",
-    "weight_kg": "body.weight_kg",
+    **{name: f"body.{name}" for name in BODY_NUMBERS},
     "untangle": "options.untangle",
     "include_body": "options.include_body",
     "untangler": "options.untangler",
     "compression": "options.compression",
 }
-NUMBERS = {"gender", "height_cm", "weight_kg"}
+NUMBERS = set(BODY_NUMBERS)
 BOOLEANS = {"untangle", "include_body"}
 EXTRA = ("v", "k", "sig")  # model version, API key id, signature
 OPTION_DEFAULTS = OutfitOptions()
+
+
+@dataclass(frozen=True)
+class UrlKind:
+    """What a GLB URL path carries: its query parameters (``FIELDS``) and the POST model they make."""
+
+    path: str
+    fields: dict[str, str]
+    model: type[BaseModel]
+
+
+OUTFITS = UrlKind(PATH, FIELDS, OutfitRequest)
+BODIES = UrlKind(BODY_PATH, BODY_FIELDS, BodyRequest)
 
 
 class QueryInvalid(ValueError):
@@ -61,7 +80,7 @@ class QueryInvalid(ValueError):
 class GlbQuery:
     """A parsed GLB URL: the request, and the URL's model version, key id and signature (or None)."""
 
-    request: OutfitRequest
+    request: OutfitRequest | BodyRequest
     version: str | None
     key_id: str | None
     sig: str | None
@@ -73,10 +92,23 @@ def _number(text: str) -> str:
     return text[:-2] if text.endswith(".0") else text
 
 
+def _body_items(spec: OutfitSpec) -> list[tuple[str, str]]:
+    """The body's numbers, girths only when given."""
+    values = ((name, getattr(spec, name)) for name in BODY_NUMBERS)
+    return [(name, _number(value)) for name, value in values if value is not None]
+
+
+def body_query(spec: OutfitSpec, compression: str, version: str) -> list[tuple[str, str]]:
+    """Canonical query of the body of ``spec`` (``BODIES``), without key id and signature."""
+    items = _body_items(spec)
+    if compression != OPTION_DEFAULTS.compression:
+        items.append(("compression", compression))
+    return [*items, ("v", version)]
+
+
 def glb_query(spec: OutfitSpec, compression: str, version: str) -> list[tuple[str, str]]:
     """Canonical query of ``spec`` (defaults left out), without key id and signature."""
-    items = [("garments", ",".join(spec.garments))]
-    items += [(name, _number(getattr(spec, name))) for name in ("gender", "height_cm", "weight_kg")]
+    items = [("garments", ",".join(spec.garments)), *_body_items(spec)]
     for name in ("untangle", "include_body"):
         if getattr(spec, name) != getattr(OPTION_DEFAULTS, name):
             items.append((name, "true" if getattr(spec, name) else "false"))
@@ -95,12 +127,13 @@ def signature(secret: bytes, key_id: str, spec: OutfitSpec, compression: str, ve
 
 
 def glb_url(spec: OutfitSpec, compression: str, version: str, key_id: str | None = None,
-            secret: bytes | None = None) -> str:  # fmt: skip
-    """The GLB URL of an outfit, signed for ``key_id`` when a secret is given."""
-    items = glb_query(spec, compression, version)
+            secret: bytes | None = None, kind: UrlKind = OUTFITS) -> str:  # fmt: skip
+    """The GLB URL of an outfit (or, ``kind=BODIES``, of a body: ``spec`` without garments), signed
+    for ``key_id`` when a secret is given."""
+    items = (body_query if kind is BODIES else glb_query)(spec, compression, version)
     if key_id is not None and secret is not None:
         items += [("k", key_id), ("sig", signature(secret, key_id, spec, compression, version))]
-    return f"{PATH}?{urlencode(items, safe=',')}"
+    return f"{kind.path}?{urlencode(items, safe=',')}"
 
 
 def _error(name: str, message: str, kind: str = "value_error") -> dict:
@@ -122,9 +155,9 @@ def _value(name: str, text: str):
     return text
 
 
-def parse_query(items: list[tuple[str, str]]) -> GlbQuery:
-    """``[(name, value)]`` of a GLB URL -> ``GlbQuery``; raises ``QueryInvalid`` naming every bad
-    parameter (unknown, repeated, malformed, or refused by the POST's own validation)."""
+def parse_query(items: list[tuple[str, str]], kind: UrlKind = OUTFITS) -> GlbQuery:
+    """``[(name, value)]`` of a GLB URL of ``kind`` -> ``GlbQuery``; raises ``QueryInvalid`` naming
+    every bad parameter (unknown, repeated, malformed, or refused by the POST's own validation)."""
     errors, seen, body = [], set(), {"body": {}, "options": {}}
     extra: dict[str, str] = {}
     for name, text in items:
@@ -135,11 +168,11 @@ def parse_query(items: list[tuple[str, str]]) -> GlbQuery:
         if name in EXTRA:
             extra[name] = text
             continue
-        if name not in FIELDS:
+        if name not in kind.fields:
             errors.append(_error(name, "unknown field", "extra_forbidden"))
             continue
         value = _value(name, text)
-        part, _, leaf = FIELDS[name].rpartition(".")
+        part, _, leaf = kind.fields[name].rpartition(".")
         if part:
             body[part][leaf] = value
         else:
@@ -147,7 +180,7 @@ def parse_query(items: list[tuple[str, str]]) -> GlbQuery:
     if errors:
         raise QueryInvalid(errors)
     try:
-        request = OutfitRequest.model_validate(body)
+        request = kind.model.model_validate(body)
     except ValidationError as e:
         raise QueryInvalid([d | {"loc": ("body", *d["loc"])} for d in e.errors()]) from None
     return GlbQuery(request, extra.get("v"), extra.get("k"), extra.get("sig"))

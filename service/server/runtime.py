@@ -8,6 +8,7 @@ self-test outfit made on a background thread, and ``ready`` turns true only when
 from __future__ import annotations
 
 import asyncio
+import hashlib
 import logging
 import threading
 import time
@@ -17,7 +18,15 @@ from dataclasses import replace
 from pathlib import Path
 
 from service.pipeline.catalog import load_catalog, verified_imports
-from service.pipeline.tryon import Engine, ModelEngine, OutfitResult, OutfitSpec, RefusedOrder, self_test
+from service.pipeline.tryon import (
+    GIRTH_FIELDS,
+    Engine,
+    ModelEngine,
+    OutfitResult,
+    OutfitSpec,
+    RefusedOrder,
+    self_test,
+)
 from service.process.manifest import MANIFEST_NAME, REFRESH_COMMAND, verify_manifest
 from service.server.access import ApiKeys, KeysFileError, RateLimiter, read_digests
 from service.server.cache import OutfitCache
@@ -27,7 +36,21 @@ from service.server.worker import BoundedWorker, DeadlineExceeded, Overloaded
 
 log = logging.getLogger(__name__)
 EngineFactory = Callable[[Settings], Engine]
+Make = Callable[[OutfitSpec], OutfitResult]
 NOT_LOADED = "models not loaded yet"
+
+
+def body_spec(spec: OutfitSpec) -> OutfitSpec:
+    """The body of ``spec`` alone: no garments, default options."""
+    return OutfitSpec((), **{name: getattr(spec, name) for name in ("gender", "height_cm", "weight_kg",
+                                                                     *GIRTH_FIELDS)})  # fmt: skip
+
+
+def body_id(spec: OutfitSpec, version: str) -> str:
+    """32 hex chars naming the body of ``spec`` (its garments and options ignored) on these models: the
+    cache key of a body alone (POST /v1/bodies), never an outfit's (``OutfitSpec.outfit_id``)."""
+    text = f"{version}\nbody\n{body_spec(spec).canonical_json()}"
+    return hashlib.sha256(text.encode()).hexdigest()[:32]
 
 
 class ModelIntegrityError(RuntimeError):
@@ -183,9 +206,23 @@ class TryOn:
         """(outfit id, result with its ``compression`` encoding written, whether it came from the cache).
         Raises NotReady, InvalidField, Overloaded, DeadlineExceeded."""
         engine = self.require_engine()
-        key = spec.outfit_id(engine.model_version)
+        return await self._serve(spec.outfit_id(engine.model_version), spec, engine, compression, engine.make,
+                                 engine.validate)  # fmt: skip
+
+    async def body(self, spec: OutfitSpec, compression: str = "none") -> tuple[str, OutfitResult, bool]:
+        """``outfit`` for the body of ``spec`` alone (``Engine.make_body``), under its ``body_id``: the
+        same cache, pool and time budget. Its ``InvalidField`` comes from the job (building the body is
+        what checks it)."""
+        engine, spec = self.require_engine(), body_spec(spec)
+        return await self._serve(body_id(spec, engine.model_version), spec, engine, compression,
+                                 engine.make_body, None)  # fmt: skip
+
+    async def _serve(
+        self, key: str, spec: OutfitSpec, engine: Engine, compression: str, make: Make,
+        validate: Callable[[OutfitSpec], None] | None,
+    ) -> tuple[str, OutfitResult, bool]:  # fmt: skip
         try:
-            key, result, cached = await self._outfit(key, spec, engine, compression)
+            key, result, cached = await self._outfit(key, spec, engine, compression, make, validate)
         except Overloaded:
             self.metrics.rejected.labels("overloaded").inc()
             raise
@@ -195,8 +232,9 @@ class TryOn:
         return key, result, cached
 
     async def _outfit(
-        self, key: str, spec: OutfitSpec, engine: Engine, compression: str
-    ) -> tuple[str, OutfitResult, bool]:
+        self, key: str, spec: OutfitSpec, engine: Engine, compression: str, make: Make,
+        validate: Callable[[OutfitSpec], None] | None,
+    ) -> tuple[str, OutfitResult, bool]:  # fmt: skip
         cached = self.cache.get(key)
         if cached is not None:
             self.metrics.cache.labels("hit").inc()
@@ -209,12 +247,13 @@ class TryOn:
             self.worker.reserve(time.monotonic() + timeout)
         try:
             try:
-                await asyncio.to_thread(engine.validate, spec)  # before counting a miss
+                if validate is not None:
+                    await asyncio.to_thread(validate, spec)  # before counting a miss
             except RefusedOrder:
                 self.metrics.rejected.labels("layer_order").inc()
                 raise
             self.metrics.cache.labels("miss").inc()
-            future = self._submit(key, spec, engine, compression, time.monotonic() + timeout, reserved)
+            future = self._submit(key, spec, make, engine, compression, time.monotonic() + timeout, reserved)
             reserved = False  # the place is the job's now (or given back by a shared job)
         finally:
             if reserved:
@@ -234,8 +273,9 @@ class TryOn:
             raise
 
     def _submit(
-        self, key: str, spec: OutfitSpec, engine: Engine, compression: str, deadline: float, reserved: bool
-    ) -> Future[OutfitResult]:
+        self, key: str, spec: OutfitSpec, make: Make, engine: Engine, compression: str, deadline: float,
+        reserved: bool,
+    ) -> Future[OutfitResult]:  # fmt: skip
         """One job per distinct outfit: identical concurrent requests share it (and give back the place
         they ``reserved``)."""
         with self._inflight_lock:
@@ -244,16 +284,18 @@ class TryOn:
                 if reserved:
                     self.worker.release()
                 return future
-            future = self.worker.submit(lambda: self._compute(key, spec, engine, compression), deadline,
+            future = self.worker.submit(lambda: self._compute(key, spec, make, engine, compression), deadline,
                                         reserved)  # fmt: skip
             self._inflight[key] = future
             self._gauges()
         future.add_done_callback(lambda _: self._done(key))
         return future
 
-    def _compute(self, key: str, spec: OutfitSpec, engine: Engine, compression: str) -> OutfitResult:
+    def _compute(
+        self, key: str, spec: OutfitSpec, make: Make, engine: Engine, compression: str
+    ) -> OutfitResult:
         self._gauges()
-        result = engine.make(spec)
+        result = make(spec)
         result.encoded(compression)
         self.metrics.observe_stages(result.report.get("seconds", {}))
         self.metrics.fallbacks.inc(len(result.report.get("numerical_fallback", [])))

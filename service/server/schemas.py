@@ -2,48 +2,70 @@
 
 Requests are strict (no "180" for 180, no true for 1) and closed (unknown fields are errors), so a
 typo in an option is refused instead of silently ignored. Bounds here are the widest the body model
-supports for any gender; the exact height and weight ranges depend on the other two values and are
-checked against the body model (``service.pipeline.body``).
+serves (``service.pipeline.body_build``: heights, and BMI at the shortest and tallest of them); the exact
+weight range depends on the height and each girth's on gender, height and weight, and are checked
+against the body model (a 422 naming the range possible).
 """
 
 from __future__ import annotations
 
+import math
 from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, StringConstraints, field_validator
 
+from service.pipeline.body_build import BMI_RANGE, HEIGHT_RANGE_CM, weight_range_kg
 from service.pipeline.catalog import Category
 from service.pipeline.gltf import Compression
 from service.pipeline.outfit import MAX_GARMENTS
-from service.pipeline.tryon import GARMENT_ID, OutfitSpec
+from service.pipeline.tryon import GARMENT_ID, GIRTH_FIELDS, OutfitSpec
 
 GarmentId = Annotated[str, StringConstraints(pattern=f"^{GARMENT_ID}$")]
-HEIGHT_CM = (135.0, 215.0)
-WEIGHT_KG = (25.0, 155.0)
+Girth = Literal["chest_cm", "waist_cm", "hip_cm"]
+# The served heights, and the weights of BMI_RANGE over them rounded outwards to 0.1 kg (23.6-308.7):
+# the schema never refuses what the body model accepts.
+HEIGHT_CM = HEIGHT_RANGE_CM
+WEIGHT_KG = (math.floor(round(weight_range_kg(HEIGHT_CM[0])[0] * 10, 6)) / 10,
+             math.ceil(round(weight_range_kg(HEIGHT_CM[1])[1] * 10, 6)) / 10)  # fmt: skip
+GIRTH_ALLOWED = ("a number above 0, or null (predicted from height and weight when missing); the exact "
+                 "range depends on gender, height and weight (GET /v1/body/ranges)")  # fmt: skip
+BODY_QUERY = "`gender`, `height_cm`, `weight_kg`, `chest_cm`, `waist_cm`, `hip_cm`"
 # What each request field accepts, quoted in every 4xx about it.
 ALLOWED = {
     "": "a JSON object with `garments` (required), `body` and `options`",
     "garments": f"a list of 1-{MAX_GARMENTS} distinct garment ids, inner to outer (GET /v1/garments)",
-    "body": "an object with `gender`, `height_cm`, `weight_kg`",
+    "body": "an object with `gender`, `height_cm`, `weight_kg` and, each optional, `chest_cm`, `waist_cm`, "
+    "`hip_cm`",
     "body.gender": "a number from 0 (male) to 1 (female)",
-    "body.height_cm": f"a number from {HEIGHT_CM[0]:g} to {HEIGHT_CM[1]:g}; the exact range depends on "
-    "gender",
+    "body.height_cm": f"a number from {HEIGHT_CM[0]:g} to {HEIGHT_CM[1]:g}",
     "body.weight_kg": f"a number from {WEIGHT_KG[0]:g} to {WEIGHT_KG[1]:g}; the exact range depends on "
-    "gender and height",
+    f"height (BMI {BMI_RANGE[0]:g}-{BMI_RANGE[1]:g})",
+    **{f"body.{name}": GIRTH_ALLOWED for name in GIRTH_FIELDS},
     "options": "an object with `untangle`, `include_body`, `measure`, `untangler`, `compression`",
     "options.untangle": "true or false",
     "options.include_body": "true or false",
     "options.measure": "true or false",
     "options.untangler": "`neural` or `reference`",
-    "query": "the POST's fields as query parameters (`garments` comma-separated, `gender`, `height_cm`, "
-    "`weight_kg`, `untangle`, `include_body`, `untangler`, `compression`), and `v`, `k`, `sig` as made "
-    "by POST /v1/outfits",
+    "query": f"the POST's fields as query parameters (`garments` comma-separated, {BODY_QUERY}, "
+    "`untangle`, `include_body`, `untangler`, `compression`), and `v`, `k`, `sig` as made by POST "
+    "/v1/outfits",
     "options.compression": "`none` (plain glTF), `quantized` (KHR_mesh_quantization) or `meshopt` "
     "(EXT_meshopt_compression)",
     "query.gender": "a number from 0 (male) to 1 (female)",
     "query.height_cm": f"a number from {HEIGHT_CM[0]:g} to {HEIGHT_CM[1]:g}",
+    "query.weight_kg": f"a number from {WEIGHT_KG[0]:g} to {WEIGHT_KG[1]:g}",
+}
+# What POST /v1/bodies and GET /v1/bodies.glb accept where it differs from the outfits' (``ALLOWED``).
+BODY_ALLOWED = {
+    "": "a JSON object with `body` and `options`",
+    "options": "an object with `compression`",
+    "query": f"the POST's fields as query parameters ({BODY_QUERY}, `compression`), and `v`, `k`, `sig` as "
+    "made by POST /v1/bodies",
 }
 CLOSED = ConfigDict(extra="forbid", strict=True)
+PREDICTED = ("predicted from height and weight (and the girths given) when missing, from real survey data "
+             "(NHANES 2017-2020, ANSUR II); a value outside what adults of that gender, height and weight "
+             "have is refused with the range possible (GET /v1/body/ranges).")  # fmt: skip
 
 
 class BodyShape(BaseModel):
@@ -54,12 +76,37 @@ class BodyShape(BaseModel):
     )
     height_cm: float = Field(
         default=178.0, ge=HEIGHT_CM[0], le=HEIGHT_CM[1], allow_inf_nan=False,
-        description="Body height in cm; the supported range depends on gender.",
+        description="Body height in cm.",
     )  # fmt: skip
     weight_kg: float = Field(
         default=75.0, ge=WEIGHT_KG[0], le=WEIGHT_KG[1], allow_inf_nan=False,
-        description="Body mass in kg; the supported range depends on gender and height.",
+        description=f"Body mass in kg; the supported range depends on height (BMI {BMI_RANGE[0]:g}-"
+        f"{BMI_RANGE[1]:g}).",
     )  # fmt: skip
+    chest_cm: float | None = Field(
+        default=None, gt=0.0, allow_inf_nan=False,
+        description="Chest girth (men) or bust girth (women) in cm, ISO 8559-1: the largest horizontal "
+        "torso girth between the natural waist and the armpits, measured as a tape would (the convex hull "
+        f"of the horizontal section). Optional: {PREDICTED}",
+    )  # fmt: skip
+    waist_cm: float | None = Field(
+        default=None, gt=0.0, allow_inf_nan=False,
+        description="Waist girth in cm, ISO 8559-1, at the natural waistline (the smallest torso girth "
+        "between the iliac crests and the lowest ribs), measured as a tape would. Optional: "
+        f"{PREDICTED}",
+    )  # fmt: skip
+    hip_cm: float | None = Field(
+        default=None, gt=0.0, allow_inf_nan=False,
+        description="Hip girth in cm, ISO 8559-1, at the buttocks' most prominent point, measured as a "
+        f"tape would. Optional: {PREDICTED}",
+    )  # fmt: skip
+
+    def spec(self, garments: tuple[str, ...] = (), **options) -> OutfitSpec:
+        """The request's body (and ``garments``, ``options``) as an ``OutfitSpec``."""
+        girths = {name: None if getattr(self, name) is None else float(getattr(self, name))
+                  for name in GIRTH_FIELDS}  # fmt: skip
+        return OutfitSpec(garments, float(self.gender), float(self.height_cm), float(self.weight_kg),
+                          **girths, **options)  # fmt: skip
 
 
 class OutfitOptions(BaseModel):
@@ -115,9 +162,29 @@ class OutfitRequest(BaseModel):
         return ids
 
     def spec(self) -> OutfitSpec:
-        b, o = self.body, self.options
-        return OutfitSpec(tuple(self.garments), float(b.gender), float(b.height_cm), float(b.weight_kg),
-                          o.untangle, o.include_body, o.measure, o.untangler)  # fmt: skip
+        o = self.options
+        return self.body.spec(tuple(self.garments), untangle=o.untangle, include_body=o.include_body,
+                              measure=o.measure, untangler=o.untangler)  # fmt: skip
+
+
+BODY_EXAMPLE = {"height_cm": 165.0, "weight_kg": 60.0, "chest_cm": 87.9, "waist_cm": 68.7, "hip_cm": 100.0,
+                "predicted": ["chest_cm", "waist_cm"]}  # fmt: skip
+
+
+class BodyReport(BaseModel):
+    """The body as built, measured on its mesh (docs/body.md): what the GLB's `body` node carries too."""
+
+    model_config = ConfigDict(json_schema_extra={"example": BODY_EXAMPLE})
+
+    height_cm: float = Field(description="Height in cm (the given one within 0.5 cm).")
+    weight_kg: float = Field(description="Mass in kg (the given one within 1 %).")
+    chest_cm: float = Field(description="Chest (bust) girth in cm, ISO 8559-1, as a tape measures it.")
+    waist_cm: float = Field(description="Natural waist girth in cm, ISO 8559-1, as a tape measures it.")
+    hip_cm: float = Field(description="Hip girth in cm, ISO 8559-1, as a tape measures it.")
+    predicted: list[Girth] = Field(
+        description="The girths not given, predicted from the others; a given girth is reproduced within "
+        "1 cm."
+    )
 
 
 class OutfitCreated(BaseModel):
@@ -148,8 +215,49 @@ class OutfitCreated(BaseModel):
         "repair; `crossing_pairs` counts what is left), `numerical_fallback` (garments served unfitted "
         "after a numerical fault), `attempts` (how many times the outfit was made: more than 1 where a "
         "garment let down around an inner one's lower junction came out crossing and was made again "
-        "with more room), `seconds` per pipeline stage."
+        "with more room), `seconds` per pipeline stage, and `body` (a `BodyReport`: the body as built, "
+        "measured on its mesh, and which girths were predicted).",
+        json_schema_extra={"properties": {"body": {"$ref": "#/components/schemas/BodyReport"}}},
     )
+
+
+class BodyOptions(BaseModel):
+    model_config = CLOSED
+
+    compression: Compression = Field(
+        default="none", description="GLB encoding, as `options.compression` of POST /v1/outfits."
+    )
+
+
+class BodyRequest(BaseModel):
+    model_config = ConfigDict(
+        extra="forbid",
+        strict=True,
+        json_schema_extra={
+            "examples": [{"body": {"gender": 1.0, "height_cm": 165, "weight_kg": 60, "hip_cm": 100}}]
+        },
+    )
+
+    body: BodyShape = Field(default_factory=BodyShape)
+    options: BodyOptions = Field(default_factory=BodyOptions)
+
+    def spec(self) -> OutfitSpec:
+        """The body as an ``OutfitSpec`` without garments (``ModelEngine.make_body``)."""
+        return self.body.spec()
+
+
+class BodyCreated(BaseModel):
+    model_config = ConfigDict(
+        json_schema_extra={
+            "example": {
+                "body": BODY_EXAMPLE,
+                "glb_url": "/v1/bodies.glb?gender=1&height_cm=165&weight_kg=60&hip_cm=100&v=4b5b0419f93c",
+            }
+        }
+    )
+
+    body: BodyReport = Field(description="The body as built, measured on its mesh.")
+    glb_url: str = Field(description="GET it for the body's GLB, on any replica (signed with API keys on).")
 
 
 class FieldError(BaseModel):
@@ -232,18 +340,29 @@ class BodyRanges(BaseModel):
         json_schema_extra={
             "example": {
                 "gender": 1.0,
-                "height_cm": {"min": 135.7, "max": 200.8},
-                "weight_kg": {"min": 40.9, "max": 76.7},
+                "height_cm": {"min": 135.0, "max": 210.0},
+                "weight_kg": {"min": 35.4, "max": 190.5},
                 "weight_at_height_cm": 165.0,
+                "chest_cm": {"min": 71.8, "max": 109.0},
+                "waist_cm": {"min": 61.0, "max": 100.1},
+                "hip_cm": {"min": 71.9, "max": 125.7},
+                "girths_at_weight_kg": 60.0,
             }
         }
     )
 
     gender: float = Field(description="The gender the ranges are for.")
-    height_cm: Range = Field(description="Heights accepted for this gender.")
+    height_cm: Range = Field(description="Heights accepted.")
     weight_kg: Range = Field(description="Weights accepted at `weight_at_height_cm`.")
     weight_at_height_cm: float = Field(
         description="The height the weight range is for: the one asked, moved into the height range."
+    )
+    chest_cm: Range = Field(description="Chest girths accepted at that height and `girths_at_weight_kg`.")
+    waist_cm: Range = Field(description="Waist girths accepted at that height and `girths_at_weight_kg`.")
+    hip_cm: Range = Field(description="Hip girths accepted at that height and `girths_at_weight_kg`.")
+    girths_at_weight_kg: float = Field(
+        description="The weight the girth ranges are for: the one asked (the middle of the weight range "
+        "when none), moved into the weight range."
     )
 
 

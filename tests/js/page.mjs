@@ -1,8 +1,9 @@
 // Headless Chromium (playwright-core, Debian's chromium) on the try-on page:
 //   node page.mjs URL SCREENSHOT.png
-// waits for the default outfit (its timings: summary.first), records the sliders' ranges for a man
-// and a woman and what a refused request leaves on screen, then picks a T-shirt and shorts, then for each GLB encoding of PAGE_COMPRESSIONS (default "none") picks
-// it, presses Dress, waits until the 3D view has loaded the returned GLB, saves a screenshot
+// waits for the default outfit (its timings: summary.first), records the sliders' and girth inputs'
+// ranges for a man and a woman and what a refused request (a hip girth no woman of her height and
+// weight has) leaves on screen, then picks a T-shirt and shorts and a hip girth (the middle of its
+// range), then for each GLB encoding of PAGE_COMPRESSIONS (default "none") picks it, presses Dress, waits until the 3D view has loaded the returned GLB, saves a screenshot
 // (SCREENSHOT-<encoding>.png) and records the GLB it fetched; prints a JSON summary. Any request
 // leaving the server fails the run (the page must work offline), and so does any console error.
 import { mkdtempSync, rmSync } from "node:fs";
@@ -58,21 +59,24 @@ try {
     shown: document.body.dataset.shown || null,
     status: document.querySelector("#status").textContent,
     statusLog: window.statusLog,
+    measured: JSON.parse(document.body.dataset.measured || "null"),
+    measuredText: document.querySelector("#measured").textContent,
     timings: window.pageTimings,
     resources: performance.getEntriesByType("resource").map((r) => ({
       name: new URL(r.name).pathname, start: Math.round(r.startTime), end: Math.round(r.responseEnd),
     })),
   }));
-  // The sliders follow the gender's range, and a refusal leaves an empty view and its message.
-  const sliders = () => page.evaluate(() => Object.fromEntries(["height", "weight"].map((id) => {
-    const s = document.getElementById(id);
-    return [id, [Number(s.min), Number(s.max), Number(s.value)]];
-  })));
+  // The sliders and girth inputs follow the ranges, and a refusal leaves an empty view and its message.
+  const sliders = () => page.evaluate(() => Object.fromEntries(
+    ["height", "weight", "chest", "waist", "hip"].map((id) => {
+      const s = document.getElementById(id);
+      return [id, [Number(s.min), Number(s.max), s.value === "" ? null : Number(s.value)]];
+    })));
   summary.ranges = { male: await sliders() };
   await page.$eval("#gender", (s) => { s.value = "1"; s.dispatchEvent(new Event("change")); });
   await page.waitForSelector("body[data-ranges^='1 ']", { timeout: 30000 });
   summary.ranges.female = await sliders();
-  await page.$eval("#height", (s) => { s.max = "215"; s.value = "214"; }); // a stale range
+  await page.fill("#hip", "300"); // beyond the input's max: sent anyway, refused by the service
   await page.click("#dress");
   await page.waitForSelector("#status.error", { timeout });
   summary.refusal = await page.evaluate(() => ({
@@ -84,6 +88,10 @@ try {
   await page.$eval("#weight", (s) => { s.value = "75"; });
   await page.$eval("#gender", (s) => { s.value = "0"; s.dispatchEvent(new Event("change")); });
   await page.waitForSelector("body[data-ranges^='0 ']", { timeout: 30000 });
+  summary.hip = await page.$eval("#hip", (s) => {
+    s.value = ((Number(s.min) + Number(s.max)) / 2).toFixed(0);
+    return Number(s.value);
+  });
   for (const box of await page.$$("input[name=garment]:checked")) await box.uncheck();
   for (const id of garments) await page.check(`input[name=garment][value=${id}]`);
   if (!untangle) await page.uncheck("#untangle");
@@ -114,6 +122,7 @@ try {
     await page.screenshot({ path: run.screenshot });
     const { pathname, search } = new URL(run.src, origin);
     run.glb = glbs[pathname + search] || null;
+    run.measured = await page.evaluate(() => JSON.parse(document.body.dataset.measured || "null"));
     summary.runs.push(run);
   }
 } finally {

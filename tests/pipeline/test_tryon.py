@@ -73,20 +73,28 @@ def test_outfit_glb_directly_without_body(client: TestClient):
 
 
 def test_body_out_of_the_models_range_names_the_field(client: TestClient):
-    request = {"garments": ["shorts"], "body": {"gender": 1, "height_cm": 210}}
+    """A hip no adult of that height and weight has: the range comes from the girth priors."""
+    from service.pipeline.body import format_range
+    from service.pipeline.girth_priors import GirthPriors
+
+    body = {"gender": 1, "height_cm": 165, "weight_kg": 60, "hip_cm": 300}
+    request = {"garments": ["shorts"], "body": body}
     response = client.post("/v1/outfits", json=request)
     assert response.status_code == 422
+    allowed = format_range(*GirthPriors.load().possible_range(1.0, "hip_cm", 165.0, 60.0))
     assert response.json()["errors"] == [{
-        "field": "body.height_cm",
-        "message": "height_cm=210 is outside the supported range 135.7-200.8 cm for gender=1",
-        "allowed": "135.7-200.8",
+        "field": "body.hip_cm",
+        "message": f"hip_cm=300 is outside the range {allowed} cm that adults of height_cm=165 and "
+                   "weight_kg=60 have",
+        "allowed": allowed,
     }]  # fmt: skip
 
 
 def test_weight_range_depends_on_height(client: TestClient):
-    request = {"garments": ["shorts"], "body": {"gender": 0, "height_cm": 150, "weight_kg": 120}}
+    """BMI 13-70 at that height: 29.3-157.5 kg at 150 cm."""
+    request = {"garments": ["shorts"], "body": {"gender": 0, "height_cm": 150, "weight_kg": 160}}
     (error,) = client.post("/v1/outfits", json=request).json()["errors"]
-    assert error["field"] == "body.weight_kg" and error["allowed"] == "38.8-74.8"
+    assert error["field"] == "body.weight_kg" and error["allowed"] == "29.3-157.5"
 
 
 def test_metrics_have_stage_histograms(client: TestClient):

@@ -3,23 +3,16 @@
 from __future__ import annotations
 
 import threading
+from functools import cache
 from pathlib import Path
 
 from fastapi import FastAPI
 
 from service.pipeline.catalog import load_catalog
+from service.pipeline.tryon import ModelEngine
 from service.server.app import create_app
 from service.server.settings import Settings
 from tests.service_tools import FakeEngine
-
-
-class RangedFakeEngine(FakeEngine):
-    """The fake engine with the ranges its ``validate`` keeps (no body above 200 cm for gender > 0.5)."""
-
-    def body_ranges(self, gender: float, height_cm: float | None) -> dict:
-        heights = (140.0, 200.0 if gender > 0.5 else 210.0)
-        h = sum(heights) / 2 if height_cm is None else min(max(height_cm, heights[0]), heights[1])
-        return {"height_cm": heights, "weight_kg": (h - 120.0, h - 80.0), "at_height_cm": h}
 
 
 def make_app(
@@ -34,8 +27,21 @@ def make_app(
 
     def factory(settings: Settings) -> FakeEngine:
         catalog = load_catalog(settings.catalog_dir())
-        engine["it"] = RangedFakeEngine(catalog, delay=delay, crossings=crossings, release=release)
+        engine["it"] = FakeEngine(catalog, delay=delay, crossings=crossings, release=release)
         return engine["it"]
 
     app = create_app(Settings(**(values | overrides)), factory)
     return app, engine
+
+
+@cache
+def body_engine() -> ModelEngine:
+    """A ``ModelEngine`` over the committed body model and girth priors only (no garments, loads in
+    ~0.3 s): its ``make_body``, ``body`` and ``body_ranges`` are the real ones."""
+    from service.pipeline.body import BodyModel
+    from service.pipeline.body_build import BodyBuilder
+    from service.pipeline.girth_priors import GirthPriors
+
+    body = BodyModel.load()
+    models = type("BodyOnlyModels", (), {"body": body, "bodies": BodyBuilder(body, GirthPriors.load())})()
+    return ModelEngine(models, "bodies")

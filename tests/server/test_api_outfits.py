@@ -113,6 +113,9 @@ def test_evicted_outfit_is_404_by_id_and_made_again_by_url(fake_models_dir: Path
 ALLOWED_GARMENTS = "a list of 1-4 distinct garment ids, inner to outer (GET /v1/garments): tshirt, pants"
 ALLOWED_REQUEST = "a JSON object with `garments` (required), `body` and `options`"
 ID_RULE = "ids are 1-32 lower case letters, digits and _, starting with a letter"
+ALLOWED_WEIGHT = "a number from 23.6 to 308.7; the exact range depends on height (BMI 13-70)"
+ALLOWED_GIRTH = ("a number above 0, or null (predicted from height and weight when missing); the exact range "
+                 "depends on gender, height and weight (GET /v1/body/ranges)")  # fmt: skip
 
 
 # (request body, field, message, allowed): also asked as GLB URLs (tests/server/test_outfit_url.py)
@@ -142,15 +145,32 @@ BAD_INPUT = [
     ({"garments": ["tshirt"], "body": {"gender": True}}, "body.gender", "Input should be a valid number",
      "a number from 0 (male) to 1 (female)"),
     ({"garments": ["tshirt"], "body": {"height_cm": "180"}}, "body.height_cm",
-     "Input should be a valid number",
-     "a number from 135 to 215; the exact range depends on gender"),
+     "Input should be a valid number", "a number from 135 to 210"),
+    ({"garments": ["tshirt"], "body": {"height_cm": 211}}, "body.height_cm",
+     "Input should be less than or equal to 210", "a number from 135 to 210"),
     ({"garments": ["tshirt"], "body": {"weight_kg": -1}}, "body.weight_kg",
-     "Input should be greater than or equal to 25",
-     "a number from 25 to 155; the exact range depends on gender and height"),
-    ({"garments": ["tshirt"], "body": {"gender": 1, "height_cm": 210}}, "body.height_cm",
-     "height_cm=210 is too tall", "135.6-200.8"),
+     "Input should be greater than or equal to 23.6", ALLOWED_WEIGHT),
+    ({"garments": ["tshirt"], "body": {"height_cm": 150, "weight_kg": 300}}, "body.weight_kg",
+     "weight_kg=300 is outside the supported range 29.3-157.5 kg for height_cm=150 (BMI 13-70)",
+     "29.3-157.5"),
+    ({"garments": ["tshirt"], "body": {"chest_cm": "90"}}, "body.chest_cm", "Input should be a valid number",
+     ALLOWED_GIRTH),
+    ({"garments": ["tshirt"], "body": {"hip_cm": -5}}, "body.hip_cm", "Input should be greater than 0",
+     ALLOWED_GIRTH),
+    ({"garments": ["tshirt"], "body": {"waist_cm": 0}}, "body.waist_cm", "Input should be greater than 0",
+     ALLOWED_GIRTH),
+    ({"garments": ["tshirt"], "body": {"waist_cm": True}}, "body.waist_cm", "Input should be a valid number",
+     ALLOWED_GIRTH),
+    # girths possible at this height and weight: FakeEngine's made-up ranges, the real engine's message
+    ({"garments": ["tshirt"], "body": {"gender": 1, "height_cm": 165, "weight_kg": 60, "hip_cm": 300}},
+     "body.hip_cm", "hip_cm=300 is outside the range 61.5-102.0 cm that adults of height_cm=165 and "
+     "weight_kg=60 have", "61.5-102.0"),
+    ({"garments": ["tshirt"], "body": {"height_cm": 165, "weight_kg": 60, "waist_cm": 93, "hip_cm": 62}},
+     "body.waist_cm", "no body has waist_cm, hip_cm together as given (waist_cm=93, hip_cm=62)",
+     "a combination a body has"),
     ({"garments": ["tshirt"], "body": {"age": 30}}, "body.age", "unknown field",
-     "an object with `gender`, `height_cm`, `weight_kg`"),
+     "an object with `gender`, `height_cm`, `weight_kg` and, each optional, `chest_cm`, `waist_cm`, "
+     "`hip_cm`"),
     ({"garments": ["tshirt"], "options": {"untangle": "yes"}}, "options.untangle",
      "Input should be a valid boolean", "true or false"),
     ({"garments": ["tshirt"], "options": {"untangler": "magic"}}, "options.untangler",
@@ -172,12 +192,13 @@ def test_bad_input_names_the_field_and_what_it_allows(client, body, field, messa
     assert response.json()["detail"].startswith(f"{field}: {message} (allowed: {allowed})")
 
 
+@pytest.mark.parametrize("name", ["height_cm", "chest_cm", "hip_cm"])
 @pytest.mark.parametrize("value", ["NaN", "Infinity", "-Infinity", "1e999"])
-def test_non_finite_numbers_are_refused(client: TestClient, value):
-    raw = '{"garments": ["tshirt"], "body": {"height_cm": VALUE}}'.replace("VALUE", value)
+def test_non_finite_numbers_are_refused(client: TestClient, value, name):
+    raw = '{"garments": ["tshirt"], "body": {"NAME": VALUE}}'.replace("VALUE", value).replace("NAME", name)
     response = client.post("/v1/outfits", content=raw, headers={"Content-Type": "application/json"})
     assert response.status_code == 422, response.text
-    assert response.json()["errors"][0]["field"] == "body.height_cm"
+    assert response.json()["errors"][0]["field"] == f"body.{name}"
 
 
 def test_malformed_json(client: TestClient):

@@ -78,14 +78,21 @@ def test_printed_bounds_round_inwards(lo, hi, printed):
 
 
 def test_the_ranges_endpoint_answers_what_the_engine_accepts(client):
-    response = client.get("/v1/body/ranges", params={"gender": 1, "height_cm": 212})
+    """FakeEngine's made-up girth ranges (tests/service_tools.py), the real heights and BMIs."""
+    response = client.get("/v1/body/ranges", params={"gender": 1, "height_cm": 165, "weight_kg": 60})
     assert response.status_code == 200
     assert response.json() == {
-        "gender": 1.0, "height_cm": {"min": 140.0, "max": 200.0}, "weight_kg": {"min": 80.0, "max": 120.0},
-        "weight_at_height_cm": 200.0,
+        "gender": 1.0, "height_cm": {"min": 135.0, "max": 210.0}, "weight_kg": {"min": 35.4, "max": 190.5},
+        "weight_at_height_cm": 165.0, "chest_cm": {"min": 61.5, "max": 102.0},
+        "waist_cm": {"min": 50.3, "max": 93.7}, "hip_cm": {"min": 61.5, "max": 102.0},
+        "girths_at_weight_kg": 60.0,
     }  # fmt: skip
+    # a weight outside the range at this height: the girths at the weight moved into it
+    heavy = client.get("/v1/body/ranges", params={"height_cm": 150, "weight_kg": 300}).json()
+    assert heavy["weight_kg"] == {"min": 29.3, "max": 157.5} and heavy["girths_at_weight_kg"] == 157.5
     middle = client.get("/v1/body/ranges").json()
-    assert middle["height_cm"] == {"min": 140.0, "max": 210.0} and middle["weight_at_height_cm"] == 175.0
+    assert middle["height_cm"] == {"min": 135.0, "max": 210.0} and middle["weight_at_height_cm"] == 172.5
+    assert middle["girths_at_weight_kg"] == (middle["weight_kg"]["min"] + middle["weight_kg"]["max"]) / 2
 
 
 def test_the_ranges_endpoint_names_a_bad_parameter(client):
@@ -97,13 +104,26 @@ def test_the_ranges_endpoint_names_a_bad_parameter(client):
                                "number from 0 (male) to 1 (female))", "errors": [error]}  # fmt: skip
 
 
-def test_the_real_engines_ranges_are_accepted_at_their_bounds(body):
-    """ModelEngine.body_ranges over the committed body model: the printed bounds of the refusals."""
-    from service.pipeline.tryon import ModelEngine
+@pytest.mark.parametrize("weight_kg", [None, 60.0, 150.0])
+def test_the_real_engines_ranges_are_accepted_at_their_bounds(weight_kg):
+    """ModelEngine.body_ranges over the committed body model and girth priors: every printed bound is
+    accepted and one printed step beyond it refused, with the refusal naming the same range."""
+    from service.pipeline.body_build import BodyRequest as Shopper
+    from service.pipeline.body_build import check_request
+    from tests.server.apps import body_engine
 
-    engine = ModelEngine(type("Models", (), {"body": body})(), "test")
-    ranges = engine.body_ranges(1.0, 165.0)
-    assert ranges == {"height_cm": (135.7, 200.8), "weight_kg": (40.9, 76.7), "at_height_cm": 165.0}
-    assert engine.body_ranges(0.0, 300.0)["at_height_cm"] == 214.8
-    for weight in ranges["weight_kg"]:
-        assert refusal(body, 1.0, 165.0, weight) is None
+    engine = body_engine()
+    ranges = engine.body_ranges(1.0, 165.0, weight_kg)
+    assert ranges["height_cm"] == (135.0, 210.0) and ranges["weight_kg"] == (35.4, 190.5)
+    assert ranges["at_height_cm"] == 165.0 and engine.body_ranges(0.0, 300.0)["at_height_cm"] == 210.0
+    w = ranges["at_weight_kg"]
+    assert w == (weight_kg if weight_kg is not None else (35.4 + 190.5) / 2)
+    priors = engine.models.bodies.priors
+    for name in ("chest_cm", "waist_cm", "hip_cm"):
+        lo, hi = ranges[name]
+        assert 0 < lo < hi
+        for value in (lo, hi):
+            check_request(priors, Shopper(1.0, 165.0, w, **{name: value}))
+        for value in (round(lo - STEP, 1), round(hi + STEP, 1)):
+            with pytest.raises(ShapeOutOfRange, match=f"outside the range {lo:.1f}-{hi:.1f} cm"):
+                check_request(priors, Shopper(1.0, 165.0, w, **{name: value}))

@@ -11,7 +11,7 @@ from urllib.parse import parse_qsl, urlencode, urlsplit
 import pytest
 from fastapi.testclient import TestClient
 
-from service.pipeline.tryon import OutfitSpec
+from service.pipeline.tryon import GIRTH_FIELDS, OutfitSpec
 from service.server.outfit_url import glb_url, parse_query
 from service.server.schemas import ALLOWED
 from tests.server.apps import make_app
@@ -41,6 +41,29 @@ def test_url_round_trips_to_the_same_request():
     odd = OutfitSpec(("tshirt",), 1 / 3, 170.123456789, 70.0)
     back = parse_query(parse_qsl(urlsplit(glb_url(odd, "none", "v1")).query)).request.spec()
     assert back.outfit_id("v1") == odd.outfit_id("v1")
+
+
+def test_girths_round_trip_when_given_and_are_absent_otherwise():
+    spec = OutfitSpec(("tshirt",), 1.0, 165.0, 60.0, chest_cm=88.5, waist_cm=70.125)
+    url = glb_url(spec, "none", "v1")
+    assert url == (
+        "/v1/outfits.glb?garments=tshirt&gender=1&height_cm=165&weight_kg=60&chest_cm=88.5"
+        "&waist_cm=70.125&v=v1"
+    )
+    back = parse_query(parse_qsl(urlsplit(url).query)).request.spec()
+    assert back == spec and back.hip_cm is None
+    # a girth given changes the outfit: another id, another URL
+    assert back.outfit_id("v1") != OutfitSpec(("tshirt",), 1.0, 165.0, 60.0).outfit_id("v1")
+
+
+def test_a_url_with_girths_makes_the_posts_outfit(app_and_engine):
+    client, engine = app_and_engine
+    request = {"garments": ["tshirt"], "body": {"gender": 1, "height_cm": 165, "weight_kg": 60, "hip_cm": 95}}
+    posted = client.post("/v1/outfits", json=request).json()
+    assert "&hip_cm=95&" in posted["glb_url"]
+    assert posted["report"]["body"]["predicted"] == ["chest_cm", "waist_cm"]
+    assert client.get(posted["glb_url"]).headers["x-outfit-id"] == posted["id"]
+    assert engine["it"].calls == 1
 
 
 def test_another_replica_makes_the_same_bytes(replicas):
@@ -96,7 +119,7 @@ def as_query(body) -> list[tuple[str, str]] | None:
             return None
         items.append(("garments", ",".join(body["garments"])))
     for name, value in body.get("body", {}).items():
-        if name not in ("gender", "height_cm", "weight_kg") or type(value) not in (int, float):
+        if name not in ("gender", "height_cm", "weight_kg", *GIRTH_FIELDS) or type(value) not in (int, float):
             return None
         items.append((name, repr(value)))
     for name, value in body.get("options", {}).items():
@@ -136,6 +159,12 @@ def test_bad_urls_get_the_posts_messages(client, body, field, message, allowed):
          ALLOWED["query.height_cm"]),
         ("garments=tshirt&gender=nan", "body.gender", "Input should be a finite number",
          ALLOWED["body.gender"]),
+        ("garments=tshirt&hip_cm=wide", "body.hip_cm", "Input should be a valid number",
+         ALLOWED["body.hip_cm"]),
+        ("garments=tshirt&waist_cm=inf", "body.waist_cm", "Input should be a finite number",
+         ALLOWED["body.waist_cm"]),
+        ("garments=tshirt&chest_cm=-3", "body.chest_cm", "Input should be greater than 0",
+         ALLOWED["body.chest_cm"]),
     ],
 )  # fmt: skip
 def test_bad_urls_name_the_parameter(client, query, field, message, allowed):

@@ -19,6 +19,7 @@ import pytest
 from service.process.paths import REPO_ROOT
 from service.server.app import create_app
 from service.server.settings import Settings
+from tests.server.apps import body_engine
 from tests.service_tools import CHROMIUM, live_server, require, require_node, run_node
 
 SCREENSHOT = REPO_ROOT / "docs" / "images" / "page.png"
@@ -59,13 +60,22 @@ def test_page_dresses_a_body_in_every_glb_encoding(tmp_path: Path):
     assert states == ["busy"] * (len(states) - 1) + [""] and len(states) >= 3
     assert first["statusLog"][0][1] == "Dressing pants < tshirt…"
     assert first["statusLog"][1][1] == "Loading the 3D view…"
-    # The sliders offer what the body model accepts (tests/server/test_body_ranges.py): heights for
-    # the gender, weights at the height (178 cm).
-    assert summary["ranges"]["male"] == {"height": [150, 214, 178], "weight": [58, 104, 75]}
-    assert summary["ranges"]["female"] == {"height": [136, 200, 178], "weight": [50, 89, 75]}
-    refusal = summary["refusal"]  # a request outside the range (a stale slider): message, empty view
-    assert refusal == {"status": "height_cm=214 is outside the supported range 135.7-200.8 cm for gender=1",
-                       "src": None, "shown": None}  # fmt: skip
+    # The body as built, every girth predicted, shown beside the inputs
+    assert first["measured"]["predicted"] == ["chest_cm", "hip_cm", "waist_cm"]
+    text = first["measuredText"]
+    assert text.startswith("Body: chest ") and text.endswith(" cm (* predicted)"), text
+    # The sliders offer what the body model accepts (tests/server/test_body_ranges.py): heights, weights
+    # at the height (178 cm: BMI 13-70), and the girth inputs the girths at that height and weight.
+    ranges = {sex: {k: v for k, v in summary["ranges"][sex].items() if k in ("height", "weight")}
+              for sex in ("male", "female")}  # fmt: skip
+    assert ranges["male"] == ranges["female"] == {"height": [135, 210, 178], "weight": [42, 221, 75]}
+    for sex, gender in (("male", 0.0), ("female", 1.0)):
+        expected = body_engine().body_ranges(gender, 178.0, 75.0)
+        for name in ("chest", "waist", "hip"):
+            assert summary["ranges"][sex][name] == [*expected[f"{name}_cm"], None], (sex, name)
+    refusal = summary["refusal"]  # a hip no woman of 178 cm and 75 kg has: message, empty view
+    assert refusal["status"].startswith("hip_cm=300 is outside the range ")
+    assert refusal["src"] is None and refusal["shown"] is None
     assert summary["layers"] == ["Shorts", "T-shirt"]
     assert [r["compression"] for r in summary["runs"]] == list(COMPRESSIONS)
     views = {}
@@ -75,6 +85,9 @@ def test_page_dresses_a_body_in_every_glb_encoding(tmp_path: Path):
         assert run["src"].startswith("/v1/outfits.glb?garments=shorts,tshirt&")
         assert ("compression=" + c in run["src"]) or c == "none", run["src"]
         assert "shorts < tshirt" in run["status"]
+        assert f"&hip_cm={summary['hip']}&" in run["src"] + "&", run["src"]  # the girth filled in was sent
+        assert run["measured"]["predicted"] == ["chest_cm", "waist_cm"]
+        assert abs(run["measured"]["hip_cm"] - summary["hip"]) <= 1.0
         required = [e for e in run["glb"]["extensionsRequired"] if e != "KHR_texture_transform"]
         assert required == EXTENSIONS[c], (c, run["glb"])
         rgb = np.asarray(image.open(run["screenshot"]).convert("RGB"))

@@ -26,8 +26,8 @@ from tests.service_tools import live_server
 
 pytest.importorskip("onnxruntime")
 EXAMPLES = os.environ.get("ULNEF_SCHEMATHESIS_EXAMPLES", "25")
-# Valid data may still be refused with 422 (unknown garment id, height out of range for a gender):
-# the schema cannot list catalog ids or the body model's coupled ranges.
+# Valid data may still be refused with 422 (unknown garment id, a weight or girth out of range for the
+# height and weight): the schema cannot list catalog ids or the body model's coupled ranges.
 EXCLUDED_CHECKS = "positive_data_acceptance"
 
 
@@ -44,11 +44,14 @@ class ExplicitOnly:
     def validate(self, spec: OutfitSpec) -> None:
         self.engine.validate(spec)
 
-    def body_ranges(self, gender: float, height_cm: float | None) -> dict:
-        return self.engine.body_ranges(gender, height_cm)
+    def body_ranges(self, gender: float, height_cm: float | None, weight_kg: float | None = None) -> dict:
+        return self.engine.body_ranges(gender, height_cm, weight_kg)
 
     def make(self, spec: OutfitSpec) -> OutfitResult:
         return self.engine.make(replace(spec, untangle=False, measure=False))
+
+    def make_body(self, spec: OutfitSpec) -> OutfitResult:
+        return self.engine.make_body(spec)
 
 
 def test_schemathesis_finds_no_server_errors(tmp_path: Path):

@@ -8,7 +8,7 @@ from typing import Annotated
 
 from fastapi import APIRouter, Depends, Header, HTTPException, Path, Request, Response
 
-from service.pipeline.tryon import GARMENT_ID
+from service.pipeline.tryon import GARMENT_ID, GIRTH_FIELDS
 from service.server import outfit_url
 from service.server.errors import HeaderInvalid
 from service.server.routes.deps import TryOnDep, authorize
@@ -88,10 +88,32 @@ def matches(if_none_match: str, tag: str) -> bool:
     return "*" in tags or tag.removeprefix("W/") in tags
 
 
-def glb_answer(data: bytes, outfit_id: str, compression: str, cache_control: str, **headers) -> Response:
-    headers = {"ETag": etag(outfit_id, compression), "Cache-Control": cache_control,
-               "X-Outfit-Id": outfit_id, **headers}  # fmt: skip
+def glb_answer(data: bytes, outfit_id: str, compression: str, cache_control: str,
+               id_header: str = "X-Outfit-Id", **headers) -> Response:  # fmt: skip
+    headers = {"ETag": etag(outfit_id, compression), "Cache-Control": cache_control, id_header: outfit_id,
+               **headers}  # fmt: skip
     return Response(data, media_type=GLB, headers=headers)
+
+
+def signed_by(tryon: TryOn, query: outfit_url.GlbQuery) -> str | None:
+    """The key id whose valid signature the GLB URL ``query`` carries (API keys and a URL secret on), or
+    None."""
+    if tryon.keys is None or tryon.url_secret is None or not (query.key_id and query.sig):
+        return None
+    spec, compression = query.request.spec(), query.request.options.compression
+    expected = outfit_url.signature(tryon.url_secret, query.key_id, spec, compression, query.version or "")
+    if hmac.compare_digest(expected, query.sig) and tryon.keys.knows(query.key_id):
+        return query.key_id
+    return None
+
+
+def accepts_glb(accept: str | None) -> bool:
+    """``wants_glb``, with a 406 where the Accept header allows neither answer."""
+    glb = wants_glb(accept)
+    if glb is None:
+        raise HeaderInvalid(406, "header.accept", f"{accept!r} allows neither answer",
+                            f"{JSON} (default) or {GLB}")  # fmt: skip
+    return glb
 
 
 def signed_url(tryon: TryOn, request: OutfitRequest, kid: str | None) -> str:
@@ -112,10 +134,7 @@ async def create_outfit(
 ) -> Response | OutfitCreated:  # fmt: skip
     """Dress a body in garments (inner to outer). Repeated requests are served from a cache. `glb_url`
     is the GLB's URL on any replica (signed for the key, with API keys on)."""
-    glb = wants_glb(accept)
-    if glb is None:
-        raise HeaderInvalid(406, "header.accept", f"{accept!r} allows neither answer",
-                            f"{JSON} (default) or {GLB}")  # fmt: skip
+    glb = accepts_glb(accept)
     kid = authorize(tryon, authorization)
     compression = request.options.compression
     outfit_id, result, cached = await tryon.outfit(request.spec(), compression)
@@ -137,6 +156,8 @@ QUERY_PARAMETERS = [
     _param("gender", {"type": "number", "minimum": 0, "maximum": 1}, "The POST's `body.gender`."),
     _param("height_cm", {"type": "number"}, "The POST's `body.height_cm`."),
     _param("weight_kg", {"type": "number"}, "The POST's `body.weight_kg`."),
+    *(_param(name, {"type": "number", "exclusiveMinimum": 0},
+             f"The POST's `body.{name}` (absent: predicted).") for name in GIRTH_FIELDS),
     _param("untangle", {"type": "boolean"}, "The POST's `options.untangle`."),
     _param("include_body", {"type": "boolean"}, "The POST's `options.include_body`."),
     _param("untangler", {"type": "string", "enum": ["neural", "reference"]},
@@ -168,13 +189,7 @@ async def get_outfit_by_url(
     query = outfit_url.parse_query(list(http.query_params.multi_items()))
     spec, compression = query.request.spec(), query.request.options.compression
     version = tryon.require_engine().model_version
-    signed_by = None
-    if tryon.keys is not None and tryon.url_secret is not None and query.key_id and query.sig:
-        version_signed = query.version or ""
-        expected = outfit_url.signature(tryon.url_secret, query.key_id, spec, compression, version_signed)
-        if hmac.compare_digest(expected, query.sig) and tryon.keys.knows(query.key_id):
-            signed_by = query.key_id
-    authorize(tryon, authorization, signed_by)
+    authorize(tryon, authorization, signed_by(tryon, query))
     outfit_id = spec.outfit_id(version)
     cache_control = IMMUTABLE if query.version == version else REVALIDATE
     tag = etag(outfit_id, compression)

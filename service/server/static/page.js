@@ -1,4 +1,5 @@
-// The try-on page: pick garments and their order, set the body, POST /v1/outfits, show the GLB.
+// The try-on page: pick garments and their order, set the body (girths optional), POST /v1/outfits,
+// show the GLB and the body's measurements.
 const $ = (id) => document.getElementById(id);
 
 // model-viewer decodes EXT_meshopt_compression once it is given a meshopt decoder's location (it loads
@@ -11,6 +12,9 @@ customElements.whenDefined("model-viewer").then(() => {
 
 // Shown at first, so the view is never empty: the first of these present in the catalog.
 const DEFAULT_OUTFIT = ["pants", "tshirt"];
+
+// The girth inputs and the request fields they fill; an empty one is left out (predicted).
+const GIRTHS = [["chest", "chest_cm", "chest"], ["waist", "waist_cm", "waist"], ["hip", "hip_cm", "hip"]];
 
 const layers = []; // garment ids, inner to outer
 let catalog = [];
@@ -70,10 +74,13 @@ function setRange(slider, range) {
   slider.value = Math.min(Math.max(Number(slider.value), slider.min), slider.max);
 }
 
-// The sliders offer only what the service accepts: heights for the gender, weights at the height.
+// The sliders offer only what the service accepts: heights, weights at the height, and the girth inputs
+// the girths possible for the gender at that height and weight (a value outside them is still sent, and
+// the service's refusal shown).
 async function followRanges() {
   const asked = ++rangesAsked;
-  const query = new URLSearchParams({ gender: $("gender").value, height_cm: $("height").value });
+  const query = new URLSearchParams({ gender: $("gender").value, height_cm: $("height").value,
+                                      weight_kg: $("weight").value });
   const response = await fetch(`/v1/body/ranges?${query}`);
   if (!response.ok || asked !== rangesAsked) return;
   const ranges = await response.json();
@@ -81,9 +88,37 @@ async function followRanges() {
   // A height moved into its range (rounded to the slider's whole cm): the weights at that height.
   if (ranges.weight_at_height_cm !== Number($("height").value)) return followRanges();
   setRange($("weight"), ranges.weight_kg);
+  if (ranges.girths_at_weight_kg !== Number($("weight").value)) return followRanges();
+  for (const [id, field] of GIRTHS) {
+    const { min, max } = ranges[field];
+    Object.assign($(id), { min, max, title: `${min}-${max} cm at this gender, height and weight` });
+  }
   showValues();
   document.body.dataset.ranges = `${$("gender").value} ${$("height").min}-${$("height").max} ` +
-                                 `${$("weight").min}-${$("weight").max}`;
+                                 `${$("weight").min}-${$("weight").max} ` +
+                                 GIRTHS.map(([id]) => `${$(id).min}-${$(id).max}`).join(" ");
+}
+
+// The girths filled in, as request fields; throws naming an input that holds no number.
+function girths() {
+  const given = {};
+  for (const [id, field, name] of GIRTHS) {
+    if ($(id).validity.badInput) throw new Error(`${name}: not a number (leave it empty to predict it)`);
+    if ($(id).value !== "") given[field] = Number($(id).value);
+  }
+  return given;
+}
+
+// The body as built (report.body): its measurements, the predicted ones marked and shown as the empty
+// inputs' placeholders.
+function showBody(body) {
+  const predicted = new Set(body.predicted);
+  const parts = GIRTHS.map(([id, field, name]) => {
+    $(id).placeholder = predicted.has(field) ? `${body[field].toFixed(1)}` : "";
+    return `${name} ${body[field].toFixed(1)}${predicted.has(field) ? "*" : ""}`;
+  });
+  $("measured").textContent = `Body: ${parts.join(", ")} cm` + (predicted.size ? " (* predicted)" : "");
+  document.body.dataset.measured = JSON.stringify(body);
 }
 
 const statusLog = (window.statusLog = []); // every status shown, for the page test
@@ -95,7 +130,9 @@ function status(text, state = "") {
 
 function clearView() {
   $("viewer").removeAttribute("src");
+  $("measured").textContent = "";
   delete document.body.dataset.shown;
+  delete document.body.dataset.measured;
 }
 
 function showGlb(url) {
@@ -123,10 +160,17 @@ async function dress() {
     clearView();
     return status("Pick at least one garment.", "error");
   }
+  let given;
+  try {
+    given = girths();
+  } catch (err) {
+    clearView();
+    return status(err.message, "error");
+  }
   const request = {
     garments: layers,
     body: { gender: Number($("gender").value), height_cm: Number($("height").value),
-            weight_kg: Number($("weight").value) },
+            weight_kg: Number($("weight").value), ...given },
     options: { untangle: $("untangle").checked, include_body: $("include-body").checked,
                compression: $("compression").value },
   };
@@ -146,6 +190,7 @@ async function dress() {
       return status(messages || answer.detail || `HTTP ${response.status}`, "error");
     }
     mark("answered");
+    if (answer.report.body) showBody(answer.report.body);
     const made = Math.round(performance.now() - t0);
     status("Loading the 3D view…", "busy");
     const event = await showGlb(answer.glb_url);
@@ -169,7 +214,7 @@ async function dress() {
 
 async function main() {
   for (const id of ["gender", "height", "weight"]) $(id).addEventListener("input", showValues);
-  for (const id of ["gender", "height"]) $(id).addEventListener("change", followRanges);
+  for (const id of ["gender", "height", "weight"]) $(id).addEventListener("change", followRanges);
   showValues();
   $("dress").onclick = dress;
   const response = await fetch("/v1/garments");
