@@ -44,18 +44,27 @@ def _check_level(z: float) -> float:
     return z
 
 
+# Up to this many heights a slicer masks every face per height rather than sorting them once (measured:
+# sorting Anny's faces costs about as much as 30 masks).
+FEW_LEVELS = 30
+
+
 class _Slicer:
     """A checked mesh ready to be sliced at many heights: faces sorted by their lowest corner, so the
-    faces a plane can cross are one contiguous run found by binary search."""
+    faces a plane can cross are one contiguous run found by binary search. ``sort=False`` skips the
+    sort (~3 ms for Anny's 26.7k faces) for a few heights: each then masks every face (~0.1 ms)."""
 
-    def __init__(self, vertices: np.ndarray, faces: np.ndarray):
+    def __init__(self, vertices: np.ndarray, faces: np.ndarray, sort: bool = True):
         check_mesh(vertices, faces)
         self.vertices = np.ascontiguousarray(vertices, dtype=np.float64)
         faces = np.asarray(faces, dtype=np.int64)
         fz = self.vertices[:, 2][faces]  # (F, 3)
         lowest = fz.min(axis=1)
-        order = np.argsort(lowest, kind="stable")
-        self.faces, self.fz, self.lowest = faces[order], fz[order], lowest[order]
+        self.sorted = sort
+        if sort:
+            order = np.argsort(lowest, kind="stable")
+            faces, fz, lowest = faces[order], fz[order], lowest[order]
+        self.faces, self.fz, self.lowest = faces, fz, lowest
         self.highest = self.fz.max(axis=1)
         self.span = float((self.highest - self.lowest).max()) if len(faces) else 0.0
 
@@ -65,8 +74,11 @@ class _Slicer:
         and parameter ``t (N,)`` (the point is ``a + t (b - a)``). Raises ValueError where the section
         is open (a crossed edge with one face: the mesh has a boundary there) or not a set of loops."""
         # A crossed face has lowest <= z < highest <= lowest + span.
-        run = slice(*np.searchsorted(self.lowest, [z - self.span, z], side="right"))
-        hit = self.highest[run] > z
+        if self.sorted:
+            run = slice(*np.searchsorted(self.lowest, [z - self.span, z], side="right"))
+            hit = self.highest[run] > z
+        else:
+            run, hit = slice(None), (self.lowest <= z) & (self.highest > z)
         tri = self.faces[run][hit]
         n_vertices = len(self.vertices)
         if not len(tri):
@@ -295,10 +307,11 @@ def tape_edges(
 ) -> list[TapeEdges]:
     """``tape_loop`` at each height ``zs (L,)`` around ``select (2,)``, with each hull corner's mesh
     edge (``TapeEdges``). Raises ValueError where no loop goes around the point."""
-    slicer = _Slicer(vertices, faces)
+    zs = np.asarray(zs, dtype=np.float64).reshape(-1)
+    slicer = _Slicer(vertices, faces, sort=len(zs) > FEW_LEVELS)
     point = _check_points(np.reshape(select, (1, 2)))[0]
     out = []
-    for z in np.asarray(zs, dtype=np.float64).reshape(-1):
+    for z in zs:
         points, succ, a, b, t = slicer.crossing_edges(_check_level(z))
         best = None
         if len(succ):

@@ -203,7 +203,7 @@ def build_body(model: BodyModel, marks: Landmarks, priors: GirthPriors, request:
     fit = first
     if first.reproduced and len(targets) > len(hard):
         budget = BODY_EVALUATIONS - first.evaluations
-        second = fit_shape(model, marks, first.shape, targets, frozenset(given), budget)
+        second = fit_shape(model, marks, first.shape, targets, frozenset(given), budget, first.measured)
         if second.reproduced:
             fit = second
     if not fit.reproduced:

@@ -163,10 +163,11 @@ def fit_shape(
     targets: dict[str, Target],
     given: frozenset[str],
     evaluations: int = MAX_EVALUATIONS,
+    start_measured: BodyMeasurements | None = None,
 ) -> BodyFit:
     """The shape near ``start (S,)`` (its gender is kept) whose body measures ``targets``; ``given`` names
     the targets whose tolerance (``TOLERANCE``) decides ``BodyFit.worst``; at most ``evaluations``
-    residual evaluations are spent."""
+    residual evaluations are spent. ``start_measured``: ``measure`` of the start, when known."""
     names = tuple(n for n in QUANTITIES if n in targets)
     lo, hi = np.array(SHAPE_BOUNDS[: len(start)]).T
     free = np.arange(1, len(start))
@@ -191,7 +192,7 @@ def fit_shape(
         ]
         return max(misses, default=0.0)
 
-    measured = measure(model.shape_vertices(shape), model.faces, marks)
+    measured = start_measured or measure(model.shape_vertices(shape), model.faces, marks)
     seen: dict[str, list[Level]] = {}
     for round_ in range(OUTER_ROUNDS):
         # The first round always runs (the soft targets are not met by a start that meets the given ones).
