@@ -100,18 +100,20 @@ def make_outfit(
     seconds["explicit"] = time.perf_counter() - t0
     # Where a garment was let down around an inner one and the repair still left crossings, the outfit
     # is made again with the next room below the junction (CollisionSettings.rooms): the usual orders, let
-    # down
-    # nowhere, are made once, and so is every outfit that comes out clean.
+    # down nowhere, are made once, and so is every outfit that comes out clean. All attempts share one
+    # budget of squeeze-and-repair passes (CollisionSettings.pass_budget): the bound on the worst case.
     how = _How(untangle_layers, untangler, settings, body_field, repair, collisions)
     attempts: list[_Attempt] = []
+    passes_left = collisions.pass_budget
     for room in collisions.rooms:
         t0 = time.perf_counter()
         explicit, lowered = _let_down(models, garment_ids, unshifted, room)
         seconds["explicit"] += time.perf_counter() - t0
         meshes = (unshifted, explicit, lowered)
-        attempt = _layered(models, garment_ids, beta, body, meshes, faces, seconds, how)
+        attempt = _layered(models, garment_ids, beta, body, meshes, faces, seconds, how, passes_left)
         attempts.append(attempt)
-        if attempt.faults == (0, 0) or not any(lowered):
+        passes_left -= attempt.passes
+        if attempt.faults == (0, 0) or not any(lowered) or passes_left <= 0:
             break
     chosen = min(attempts, key=lambda a: a.faults)  # the first of the fewest faults
     layer_ids = [BODY, *garment_ids]
@@ -120,6 +122,7 @@ def make_outfit(
     outfit = Outfit(body, models.body.faces, list(zip(garment_ids, world, faces, strict=True)))
     report = {"garments": garment_ids, "beta": beta.tolist(), "untangled": untangle_layers}
     report["attempts"] = len(attempts)
+    report["passes"] = sum(a.passes for a in attempts)
     if untangle_layers:
         report |= _fit_report(garment_ids, explicit, faces, fits, untangler)
     if repairs:
@@ -191,6 +194,7 @@ class _Attempt:
     fit_world: list[np.ndarray]
     world: list[np.ndarray]
     repairs: list
+    passes: int = 0  # squeeze-and-repair passes run
 
     @property
     def faults(self) -> tuple[int, int]:
@@ -210,10 +214,12 @@ class _How:
     collisions: CollisionSettings
 
 
-def _layered(models, garment_ids, beta, body, meshes, faces, seconds: dict, how: _How) -> _Attempt:
+def _layered(
+    models, garment_ids, beta, body, meshes, faces, seconds: dict, how: _How, pass_limit: int
+) -> _Attempt:
     """The fit, the body map and the repair of one ``_let_down``'s explicit meshes: ``meshes`` is (the
     explicit meshes before any junction moved them, after, how far each moved). The time of each stage
-    is added to ``seconds``."""
+    is added to ``seconds``; the repair runs at most ``pass_limit`` passes."""
     unshifted, explicit, lowered = meshes
     untangle_layers, untangler, settings = how.untangle_layers, how.untangler, how.settings
     body_field, repair, collisions = how.body_field, how.repair, how.collisions
@@ -252,7 +258,7 @@ def _layered(models, garment_ids, beta, body, meshes, faces, seconds: dict, how:
     t0 = time.perf_counter()
     world = models.space.to_bodies(fitted, body)
     add("world", time.perf_counter() - t0)
-    fit_world, repairs = world, []
+    fit_world, repairs, passes = world, [], 0
     if untangle_layers and repair:
         t0 = time.perf_counter()
         # Every layer's fields at every fitted vertex, as the fit left them (None: evaluate again).
@@ -260,10 +266,11 @@ def _layered(models, garment_ids, beta, body, meshes, faces, seconds: dict, how:
         anchors = [models.pairs.anchors(g) for g in garment_ids]
         stack = Stack(faces, anchors, _segment_test(models, garment_ids), _fields_of(models, layer_ids, beta))
         body_mesh = ClosestPoint.build(body, models.body.faces)
-        resolved = resolve(stack, body_mesh, explicit, Fitted(fitted, cache), world, lowered, collisions)
-        world, repairs = resolved.meshes, resolved.repairs
+        resolved = resolve(stack, body_mesh, explicit, Fitted(fitted, cache), world, lowered, collisions,
+                           pass_limit)  # fmt: skip
+        world, repairs, passes = resolved.meshes, resolved.repairs, resolved.passes
         add("repair", time.perf_counter() - t0)
-    return _Attempt(explicit, fits, fitted, fit_world, world, repairs)
+    return _Attempt(explicit, fits, fitted, fit_world, world, repairs, passes)
 
 
 def _fit_report(ids, explicit, faces, fits: list[FitResult], untangler: str) -> dict:

@@ -10,7 +10,7 @@ from the fields at the fitted canonical vertices (``Fitted.field_at``).
 from __future__ import annotations
 
 from concurrent.futures import Future
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
 
@@ -36,6 +36,7 @@ class Resolved:
 
     meshes: list[np.ndarray]
     repairs: list[RepairResult]
+    passes: int = 1  # squeeze-and-repair passes run to find them
 
     @property
     def faults(self) -> tuple[int, int]:
@@ -44,7 +45,7 @@ class Resolved:
 
 def resolve(stack: Stack, body: ClosestPoint, explicit: list[np.ndarray], fitted: Fitted,
             world: list[np.ndarray], lowered: list[float] | None = None,
-            settings: CollisionSettings = SETTINGS) -> Resolved:  # fmt: skip
+            settings: CollisionSettings = SETTINGS, pass_limit: int | None = None) -> Resolved:  # fmt: skip
     """The squeeze then the repair of the fitted world meshes ``world`` (per garment ``(V_i, 3)``, on the
     body mesh ``body``); where faults are left, again, up to ``settings.passes`` times in each of
     ``settings.ways``, a pass of each in turn, until one comes out clean. A way stops after
@@ -54,28 +55,33 @@ def resolve(stack: Stack, body: ClosestPoint, explicit: list[np.ndarray], fitted
     Returns the pass with the fewest crossings, then vertices inside (``repair_faults``). ``explicit``:
     the explicit canonical meshes the fields were learned on. ``lowered``: per garment, how far (m) its
     explicit mesh was let down from the one its fields know (``collisions.junctions``), which widens
-    where the garments over it look for it."""
+    where the garments over it look for it. ``pass_limit``: at most this many passes (at least one),
+    what is left of a request's ``settings.pass_budget``."""
     lowered = lowered or [0.0] * len(world)
-    best = None
+    limit = max(1, pass_limit if pass_limit is not None else settings.pass_budget)
+    best, run = None, 0
     chains = [_Chain(way, world, [np.full(len(x), settings.margin) for x in world]) for way in settings.ways]
     for _ in range(settings.passes):
         for chain in chains:
             if chain.stale >= settings.pass_patience:
                 continue
+            if run == limit:
+                return replace(best, passes=run)
             squeezed = _squeeze(stack, fitted, chain.start, body, chain.deep, chain.pressed, chain.way,
                                 settings)  # fmt: skip
             out = _repair(stack, body, explicit, fitted, world, squeezed, settings, lowered)
+            run += 1
             # Crossings first: a vertex left inside an inner layer is within the quality bound (0.1 %)
             # long before a crossing pair is.
             if best is None or out.faults < best.faults:
                 best = out
             if out.faults == (0, 0):
-                return out
+                return replace(out, passes=run)
             chain.stale = 0 if out.faults < chain.fewest else chain.stale + 1
             chain.fewest = min(chain.fewest, out.faults)
             _deepen(out.repairs, stack.faces, chain.deep, chain.pressed, settings)
             chain.start = out.meshes if chain.way.from_repaired else world
-    return best
+    return replace(best, passes=run)
 
 
 def repair_faults(results) -> tuple[int, int]:
