@@ -12,8 +12,8 @@ Contract (``docs/collisions.md`` has it with pictures):
   ``collision_free`` is true only when that outfit has none. What is tried, at most (the retry budget, in
   ``settings.CollisionSettings``): ``rooms`` (3) let-down rooms x ``ways`` (2) x ``passes`` (6) passes
   x ``repair_rounds`` (24) rounds per garment, and at most ``pass_budget`` (12) passes over all the
-  attempts of a request (a deterministic bound on its time); an outfit that comes out clean stops at once, and the
-  usual orders (nothing let down) are made with one room and one pass.
+  attempts of a request (a deterministic bound on its time); an outfit that comes out clean stops at
+  once, and the usual orders (nothing let down) are made with one room and one pass.
 - **Refused before any of it**: orders cloth cannot take (``layering.LayeringRule.refusals``: a skirt
   over pants' legs, a garment too tight for what is under it), answered 422 by the service.
 
