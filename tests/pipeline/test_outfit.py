@@ -306,17 +306,18 @@ def test_a_let_down_outfit_left_crossing_is_made_again_with_the_next_room(models
     from service.pipeline.collisions.passes import Resolved
     from service.pipeline.collisions.repair import RepairResult
 
-    rooms, calls = [], []
+    rooms, calls, limits = [], [], []
     lowering = models.pairs.lowering
     monkeypatch.setattr(models.pairs, "lowering", lambda *a: rooms.append(a[4]) or lowering(*a))
 
-    def resolve(stack, body, explicit, fitted, world, lowered, settings):
+    def resolve(stack, body, explicit, fitted, world, lowered, settings, pass_limit):
+        limits.append(pass_limit)
         n = left[len(calls)]
         calls.append(([x.copy() for x in explicit], world))
         out = [x + len(calls) for x in world]  # tells the attempts apart
         crossing = [0] * (len(out) - 1) + [n]  # all on the outermost garment
         return Resolved(out, [RepairResult(x, np.zeros(len(x), bool), 1, c, 0)
-                              for x, c in zip(out, crossing, strict=True)])
+                              for x, c in zip(out, crossing, strict=True)], passes=2)
 
     monkeypatch.setattr(outfit, "resolve", resolve)
     beta = sample_betas(2, 3)[1]
@@ -325,6 +326,9 @@ def test_a_let_down_outfit_left_crossing_is_made_again_with_the_next_room(models
     assert len(SETTINGS.rooms) == len(left)
     attempts = next((k + 1 for k, n in enumerate(left) if n == 0), len(left))  # up to the first clean one
     assert r.report["attempts"] == len(calls) == attempts
+    # The attempts share the pass budget: each is offered what the ones before left.
+    assert limits == [SETTINGS.pass_budget - 2 * k for k in range(attempts)]
+    assert r.report["passes"] == 2 * attempts
     assert sorted(set(rooms)) == sorted(SETTINGS.rooms[:attempts])
     assert r.report["crossing_pairs"] == left[chosen]
     for (_, x, _), fitted in zip(r.garments, calls[chosen][1], strict=True):
