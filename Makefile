@@ -28,6 +28,7 @@ test: $(VENV)/.installed-test $(JS_DIR)/node_modules/.installed chromium nginx
 models: $(VENV)/.installed-test
 	$(BIN)/python -m export.body
 	$(BIN)/python -m training.body_priors
+	$(BIN)/python -m training.body_table
 	$(BIN)/python -m export.body_sdf
 	$(BIN)/python -m training.garments
 	$(BIN)/python -m training.drape

@@ -5,7 +5,9 @@ Run (a few minutes)::
     python -m benchmarks.latency [--bodies 8] [--threads 2] [--compare REF]
 
 For body + 1, 2, 3 and 4 garments (tops stacked, a bottom under them), ``--bodies`` random shapes
-from the supported box each: p50 / p95 of the total and the p50 of every stage (``report["seconds"]``;
+from the garments' box each, asked as a shop asks (gender, height and weight; the body built as the
+service builds it, its time in "body"): p50 / p95 of the total and the p50 of every stage
+(``report["seconds"]``;
 no quality measures, as the service calls it; the garments' fits run side by side, so "fit" is their
 wall time and fields / untangle / optimise are summed over the garments), then the throughput of two
 requests at a time (two threads sharing the models, as ``ULNEF_WORKERS=2``), then the field evaluation
@@ -71,17 +73,19 @@ def main(argv=None) -> None:
     parser.add_argument("--compare", metavar="REF", help="a git ref to measure against, side by side")
     args = parser.parse_args(argv)
     betas = sample_betas(args.bodies, SEED)
+    bodies = human_units(betas)
     if args.compare:
-        compare(args.compare, betas, args.threads)
+        compare(args.compare, bodies, args.threads)
         return
+    from benchmarks.latency_worker import outfit_seconds
     from service.pipeline.outfit import OutfitModels, make_outfit
 
     models = OutfitModels.load(threads=args.threads)
     models.warm()  # what the service makes at start (service.pipeline.tryon.ModelEngine.load)
     make_outfit(models, ["shorts"], betas[0], measure=False)  # warm-up: sessions, caches, allocator
     _header(f"## Latency, one request at a time, {args.bodies} new body shapes per outfit (ms)")
-    for ids in OUTFITS:
-        reports = [make_outfit(models, list(ids), b, measure=False).report["seconds"] for b in betas]
+    for k, ids in enumerate(OUTFITS):
+        reports = [outfit_seconds(models, list(ids), new_body(b, k)) for b in bodies]
         print(_row(ids, reports))
     ids = OUTFITS[1]
     one = np.median([make_outfit(models, list(ids), b, measure=False).report["seconds"]["total"]
@@ -109,8 +113,8 @@ class _Worker:
                                      stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)  # fmt: skip
         assert json.loads(self.proc.stdout.readline())["ready"]
 
-    def __call__(self, ids, beta) -> dict:
-        self.proc.stdin.write(json.dumps({"garments": list(ids), "beta": list(map(float, beta))}) + "\n")
+    def __call__(self, ids, body) -> dict:
+        self.proc.stdin.write(json.dumps({"garments": list(ids), "body": list(map(float, body))}) + "\n")
         self.proc.stdin.flush()
         return json.loads(self.proc.stdout.readline())
 
@@ -129,7 +133,20 @@ def _worktree(ref: str) -> tuple[Path, str]:
     return path, sha
 
 
-def compare(ref: str, betas: np.ndarray, threads: int) -> None:
+def human_units(betas: np.ndarray) -> list[list[float]]:
+    """(gender, height_cm, weight_kg) of the box bodies of ``betas (B, 3)``: what a request sends."""
+    from service.pipeline.body import BodyModel, measurements_from_shape
+
+    model = BodyModel.load()
+    return [[float(b[0]), *measurements_from_shape(model, b)] for b in betas]
+
+
+def new_body(body: list[float], row: int) -> list[float]:
+    """``body`` 0.01 mm taller per outfit row: new to the service's body cache, the same body to a tape."""
+    return [body[0], body[1] + 1e-3 * row, body[2]]
+
+
+def compare(ref: str, bodies: list[list[float]], threads: int) -> None:
     """Both trees' tables and the ratio of their p50s, requests alternating between them."""
     path, sha = _worktree(ref)
     here = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=REPO, capture_output=True,
@@ -137,16 +154,16 @@ def compare(ref: str, betas: np.ndarray, threads: int) -> None:
     workers = {"ref": _Worker(path, threads), "this": _Worker(REPO, threads)}
     seconds = {name: {ids: [] for ids in OUTFITS} for name in workers}
     for worker in workers.values():  # warm-up
-        worker(("shorts",), betas[0])
-    for ids in OUTFITS:
-        for i, beta in enumerate(betas):
+        worker(("shorts",), [0.5, 170.0, 70.0])
+    for k, ids in enumerate(OUTFITS):
+        for i, body in enumerate(bodies):
             order = ("ref", "this") if i % 2 == 0 else ("this", "ref")
             for name in order:
-                seconds[name][ids].append(workers[name](ids, beta))
+                seconds[name][ids].append(workers[name](ids, new_body(body, k)))
     for worker in workers.values():
         worker.close()
     for name, title in (("ref", f"{ref} ({sha})"), ("this", f"this tree (HEAD {here} + changes)")):
-        _header(f"## {title}: one request at a time, {len(betas)} new body shapes per outfit (ms)")
+        _header(f"## {title}: one request at a time, {len(bodies)} new body shapes per outfit (ms)")
         for ids in OUTFITS:
             print(_row(ids, seconds[name][ids]))
         print()

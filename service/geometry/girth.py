@@ -266,7 +266,7 @@ def tape_girths(
     heights or one per height ``(L, 2)``: girths ``(L,)`` and the tapes' hulls (a list of L ``(H, 2)``).
     A height where no loop goes around its point gives NaN and an empty ``(0, 2)`` hull instead of
     raising. Checks and sorts the mesh once."""
-    slicer = _Slicer(vertices, faces)
+    slicer = _Slicer(vertices, faces, sort=np.size(zs) > FEW_LEVELS)
     zs = np.asarray(zs, dtype=np.float64).reshape(-1)
     if not np.all(np.isfinite(zs)):
         raise ValueError("zs must be finite")

@@ -32,9 +32,10 @@ from service.pipeline.body import (
     supported_height_range_cm,
     supported_weight_range_kg,
 )
-from service.pipeline.body_fit import GIVEN_SCALE, TOLERANCE, BodyFit, Target, fit_shape
+from service.pipeline.body_fit import GIVEN_SCALE, TOLERANCE, BodyFit, Target, evaluate, fit_shape
+from service.pipeline.body_table import HW_ROWS, LEVEL_COLUMNS, BodyTable, girths_at, with_height_and_weight
 from service.pipeline.girth_priors import GirthPriors
-from service.pipeline.measurements import BodyMeasurements, Landmarks, landmarks
+from service.pipeline.measurements import BodyMeasurements, Landmarks, landmarks, measure
 
 GIRTHS = ("chest_cm", "waist_cm", "hip_cm")
 # Served heights and BMIs: NHANES 2017-2020 adults span 139-200 cm and BMI 14.2-67.0; issue 55 asks
@@ -44,6 +45,8 @@ BMI_RANGE = (13.0, 70.0)
 # Residual evaluations a body's two fits may spend together: a bound on the time an impossible
 # combination takes to refuse (~2 s on 2 busy cores; a body NHANES has takes ~20-60).
 BODY_EVALUATIONS = 150
+# Genders whose girths are read at the table's levels; others are measured (``_from_table``).
+TABLE_GENDERS = (0.0, 1.0)
 # Bodies kept per process: a shopper tries many outfits on one body (~0.1-1 s each to build, ~0.5 MB).
 BODY_CACHE = 256
 # A rough start for the fit (Anny's height axis: 108.9 cm per unit, women 176.9 cm and men 190.9 cm at
@@ -78,7 +81,7 @@ class BuiltBody:
     measured: BodyMeasurements
     predicted: dict[str, float]
     given: tuple[str, ...]
-    fit: BodyFit = field(repr=False)
+    fit: BodyFit | None = field(repr=False)  # None: read from the table (``body_table``)
 
     def report(self) -> dict:
         """The body as built, for the JSON report and the GLB (rounded to 0.1 cm / 0.1 kg)."""
@@ -188,8 +191,15 @@ def garment_beta(model: BodyModel, request: BodyRequest) -> np.ndarray:
     return shape_from_measurements(model, request.gender, h, float(np.clip(request.weight_kg, w_lo, w_hi)))
 
 
-def build_body(model: BodyModel, marks: Landmarks, priors: GirthPriors, request: BodyRequest) -> BuiltBody:
-    """The shopper's body (module docstring); raises ``ShapeOutOfRange``.
+def build_body(
+    model: BodyModel,
+    marks: Landmarks,
+    priors: GirthPriors,
+    request: BodyRequest,
+    table: BodyTable | None = None,
+) -> BuiltBody:
+    """The shopper's body (module docstring); raises ``ShapeOutOfRange``. A request without girths is
+    read from ``table`` when given (``body_table``, ~2 ms), fitted where the table has no body for it.
 
     Two fits: the given measurements alone, then from there with the predicted girths too, kept when it
     still reproduces the given ones. Started cold with the predictions, the fit fell into a local
@@ -198,8 +208,16 @@ def build_body(model: BodyModel, marks: Landmarks, priors: GirthPriors, request:
     request = check_request(priors, request)
     targets, predicted = targets_of(priors, request)
     given = ("height_cm", "weight_kg", *request.given)
+    if table is not None and not request.given:
+        built = _from_table(model, marks, table, request, predicted)
+        if built is not None:
+            return built
     hard = {n: targets[n] for n in given}
-    first = fit_shape(model, marks, start_shape(model, request), hard, frozenset(given), BODY_EVALUATIONS)
+    try:
+        first = fit_shape(model, marks, start_shape(model, request), hard, frozenset(given), BODY_EVALUATIONS)
+    except ValueError as e:  # the start's landmarks not found: no body to offer
+        lo, hi = weight_range_kg(request.height_cm)
+        raise ShapeOutOfRange("weight_kg", f"no body could be built for {request}: {e}", (lo, hi)) from None
     fit = first
     if first.reproduced and len(targets) > len(hard):
         budget = BODY_EVALUATIONS - first.evaluations
@@ -214,8 +232,12 @@ def build_body(model: BodyModel, marks: Landmarks, priors: GirthPriors, request:
         field = misses[0]
         if field in GIRTHS:
             allowed = priors.possible_range(request.gender, field, request.height_cm, request.weight_kg)
+        elif field == "weight_kg":  # as far as the body reached towards it
+            lo, hi = weight_range_kg(request.height_cm)
+            reached = fit.measured.weight_kg
+            allowed = (lo, reached) if request.weight_kg > reached else (reached, hi)
         else:
-            allowed = weight_range_kg(request.height_cm) if field == "weight_kg" else HEIGHT_RANGE_CM
+            allowed = HEIGHT_RANGE_CM
         message = f"no body has {', '.join(misses)} together as given ({asked}); closest built: {closest}"
         raise ShapeOutOfRange(field, message, allowed)
     return BuiltBody(
@@ -223,16 +245,39 @@ def build_body(model: BodyModel, marks: Landmarks, priors: GirthPriors, request:
     )
 
 
+def _from_table(model, marks, table: BodyTable, request: BodyRequest, predicted: dict) -> BuiltBody | None:
+    looked = table.lookup(request.gender, request.height_cm, request.weight_kg)
+    if looked is None:
+        return None
+    shape = with_height_and_weight(model, marks, looked[0], request.height_cm, request.weight_kg)
+    if shape is None:
+        return None
+    vertices = model.shape_vertices(shape)
+    if request.gender in TABLE_GENDERS:
+        (height, weight), _ = evaluate(model, marks, shape, HW_ROWS)
+        girths = girths_at(model, marks, vertices, looked[1])
+        if girths is None:
+            return None
+        levels = dict(zip(LEVEL_COLUMNS, looked[1].tolist(), strict=True))
+        measured = BodyMeasurements(height, weight, *girths, levels_m=levels)
+    else:  # a mixed body's landmarks are not the mix of the sexes' (its bust level: ~2 cm off)
+        try:
+            measured = measure(vertices, model.faces, marks)
+        except ValueError:
+            return None
+    return BuiltBody(shape, garment_beta(model, request), measured, predicted, (), None)
+
+
 class BodyBuilder:
     """``build_body`` on one body model and its priors, the last ``BODY_CACHE`` bodies kept."""
 
-    def __init__(self, model: BodyModel, priors: GirthPriors):
-        self.model, self.priors = model, priors
+    def __init__(self, model: BodyModel, priors: GirthPriors, table: BodyTable | None = None):
+        self.model, self.priors, self.table = model, priors, table
         self.marks = landmarks(model)
         self.build = lru_cache(maxsize=BODY_CACHE)(self._build)
 
     def _build(self, request: BodyRequest) -> BuiltBody:
-        return build_body(self.model, self.marks, self.priors, request)
+        return build_body(self.model, self.marks, self.priors, request, self.table)
 
     def ranges(self, gender: float, height_cm: float | None, weight_kg: float | None) -> dict:
         """What ``check_request`` accepts: heights, the weights at ``height_cm`` (clamped into the

@@ -204,11 +204,14 @@ def fit_shape(
         v = model.shape_vertices(shape)
         _add_levels(seen, carried_levels(v, marks, measured), v)
         rows = measured_rows(names, seen)
-        shape, taken = _levenberg_marquardt(
+        trial, taken = _levenberg_marquardt(
             lambda x, r=rows: residuals(x, r), shape, free, lo, hi, evaluations - spent
         )
         spent += taken
-        measured = measure(model.shape_vertices(shape), model.faces, marks)
+        try:
+            measured, shape = measure(model.shape_vertices(trial), model.faces, marks), trial
+        except ValueError:  # a body whose landmarks ``measure`` cannot find (a tiny, thin man): keep the last
+            break
     return BodyFit(shape, measured, worst_of(measured), spent)
 
 

@@ -16,6 +16,7 @@ import numpy as np
 from service.geometry.sdf_grid import SdfGrid
 from service.pipeline.body import DEFAULT_BETA, BodyModel
 from service.pipeline.body_build import BodyBuilder
+from service.pipeline.body_table import TABLE_NAME, BodyTable
 from service.pipeline.canonical import CanonicalSpace
 from service.pipeline.catalog import Garment, load_catalog
 from service.pipeline.collisions.caches import PairCaches
@@ -42,6 +43,7 @@ class LoadedModels:
     space: CanonicalSpace
     body_sdf: SdfGrid | None = None
     priors: GirthPriors | None = None  # None: the bundled models' (``GirthPriors.load()``)
+    body_table: BodyTable | None = None  # None: every body fitted (``body_build``)
 
     @classmethod
     def load(cls, directory: Path | None = None, threads: int = 2, imported: list[Path] = ()) -> LoadedModels:
@@ -71,6 +73,7 @@ class LoadedModels:
             CanonicalSpace.build(body.vertices(np.asarray(DEFAULT_BETA)), body.faces, threads),
             SdfGrid.load(sdf) if (sdf := directory / "body" / "mean_sdf.npz").exists() else None,
             GirthPriors.load(p) if (p := directory / "body" / "girth_priors.json").exists() else None,
+            BodyTable.load(t) if (t := directory / "body" / TABLE_NAME).exists() else None,
         )  # fmt: skip
 
 
@@ -83,7 +86,7 @@ class OutfitModels:
         self.loaded = loaded
         self.clearance = BodyClearance(loaded.space.closest, loaded.body_sdf)
         self.pairs = PairCaches(loaded.catalog, loaded.explicit, loaded.space, self.clearance)
-        self.bodies = BodyBuilder(loaded.body, loaded.priors or GirthPriors.load())
+        self.bodies = BodyBuilder(loaded.body, loaded.priors or GirthPriors.load(), loaded.body_table)
 
     @classmethod
     def load(cls, directory: Path | None = None, threads: int = 2, imported: list[Path] = ()) -> OutfitModels:

@@ -174,8 +174,8 @@ class CollisionSettings:
     """Passes a request may run in all, over its rooms and ways: the bound on its worst case. Before it,
     the slowest stack measured (pants < jacket < tshirt < long_sleeve on a 146 cm, 42 kg woman) ran 21
     passes in 3 rooms, 23-31 s on 2 cores, past the service's 30 s deadline; a pass of four garments
-    costs ~0.5-0.7 s on 2 quiet cores, so 12 keep every outfit under 10 s (``benchmarks.orders``
-    ``--worst``, docs/collisions.md)."""
+    costs ~0.5-0.7 s on 2 quiet cores, so 12 keep those outfits under 10 s (``python -m
+    benchmarks.worst_case``, docs/collisions.md)."""
     deepen: float = 0.002
     """m: how much deeper, each pass, the squeeze presses an inner garment under an outer one where the
     repair left them crossing; lifting the outer one is all the repair can do, and over the gathered
