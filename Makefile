@@ -48,6 +48,7 @@ pictures: $(VENV)/.installed-test
 	$(BIN)/python -m training.collision_pictures
 	$(BIN)/python -m training.measurement_pictures
 	$(BIN)/python -m training.population_pictures
+	$(BIN)/python -m training.self_contact_pictures
 
 lint: $(VENV)/.installed-dev
 	$(BIN)/ruff check .

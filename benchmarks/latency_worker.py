@@ -28,7 +28,7 @@ def outfit_seconds(models, garments: list[str], body: list[float]) -> dict:
         from service.pipeline.body_build import BodyRequest
 
         built = models.bodies.build(BodyRequest(*body))
-        beta, extra = built.garment_beta, {"body_vertices": models.body.shape_vertices(built.shape)}
+        beta, extra = built.garment_beta, {"body_vertices": built.vertices}
     else:
         from service.pipeline.body import shape_from_measurements
 

@@ -65,6 +65,7 @@ CACHE_INPUTS = (
         for f in ("body.py", "body_fit.py", "body_build.py", "measurements.py")
     ),  # fmt: skip
     REPO_ROOT / "service" / "geometry" / "girth.py",
+    REPO_ROOT / "service" / "geometry" / "self_contact.py",
 )
 
 
@@ -172,7 +173,9 @@ def person_record(builder: BodyBuilder, gender: float, row: dict[str, float], pr
     m = built.measured
     record = {"outcome": "served", "build_ms": 1e3 * (time.perf_counter() - start),
               "height_err_cm": m.height_cm - h, "weight_err_pct": 100.0 * (m.weight_kg - w) / w,
-              "hip_err_cm": m.hip_cm - hip, "iliac_err_cm": m.waist_iliac_cm - row["BMXWAIST"]}  # fmt: skip
+              "hip_err_cm": m.hip_cm - hip, "iliac_err_cm": m.waist_iliac_cm - row["BMXWAIST"],
+              "pressed": built.pressed is not None,
+              "crossings": built.pressed.crossings if built.pressed is not None else 0}  # fmt: skip
     if predict:
         try:
             alone = builder.build(BodyRequest(gender, h, w))
@@ -321,13 +324,14 @@ def _stats(values: np.ndarray, kind: str) -> str:
     return f"{np.median(v):+.1f} / {np.abs(v).mean():.1f} / {np.percentile(np.abs(v), 90):.1f}"
 
 
-ERROR_HEADER = ["sex", "BMI", "served", "height error cm", "weight error %", "hip error cm", "build ms",
-                "build ms, max"]  # fmt: skip
+ERROR_HEADER = ["sex", "BMI", "served", "height error cm", "weight error %", "hip error cm", "pressed",
+                "crossing after", "build ms", "build ms, max"]  # fmt: skip
 
 
 def error_rows(populations: dict[str, Population], recs: dict[str, list[dict]]) -> list[list[str]]:
     """Per sex and BMI band: the served, the given measurements' errors on the built mesh (|error|
-    median / max) and the build time (median, max)."""
+    median / max), how many bodies were pressed where their parts crossed and how many still cross
+    (``self_contact``), and the build time (median, max)."""
     rows = []
     for sex, pop in populations.items():
         band = band_index(pop.bmi, BMI_EDGES)
@@ -344,6 +348,8 @@ def error_rows(populations: dict[str, Population], recs: dict[str, list[dict]]) 
                     _stats(col["height_err_cm"], "abs"),
                     _stats(col["weight_err_pct"], "abs"),
                     _stats(col["hip_err_cm"], "abs"),
+                    str(sum(r.get("pressed", False) for r in served)),
+                    str(sum(r.get("crossings", 0) > 0 for r in served)),
                     f"{np.median(ms):.0f}" if len(ms) else "-",
                     f"{ms.max():.0f}" if len(ms) else "-",
                 ]

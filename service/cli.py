@@ -231,7 +231,7 @@ def write_body(args: argparse.Namespace, out: Path) -> int:
         print(f"ulnef avatar: {option(err.field)}: {err}", file=sys.stderr)
         return 2
     report = {"body": built.report()}
-    layer = GltfLayer("body", model.shape_vertices(built.shape), model.faces, extras=report)
+    layer = GltfLayer("body", built.vertices, model.faces, extras=report)
     try:
         out.parent.mkdir(parents=True, exist_ok=True)
         out.write_bytes(outfit_glb([layer]))

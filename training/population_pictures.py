@@ -71,7 +71,7 @@ def main(argv: list[str] | None = None) -> None:
         built = models.bodies.build(
             BodyRequest(p["gender"], p["height_cm"], p["weight_kg"], hip_cm=p["hip_cm"])
         )
-        v = models.body.shape_vertices(built.shape)
+        v = built.vertices
         m = built.measured
         sex = p["sex"][0].upper()
         title = f"{sex} {m.height_cm:.0f} cm {m.weight_kg:.0f} kg BMI {p['bmi']:.0f} hip {m.hip_cm:.0f}"

@@ -51,6 +51,8 @@ import numpy as np
 
 from service.geometry.mesh import check_mesh, signed_volume
 from service.geometry.mesh_topology import frozen
+from service.geometry.rings import dilate, vertex_neighbours
+from service.geometry.self_contact import self_crossings
 from service.pipeline.appearance import DisplayMesh
 from service.process.paths import models_dir
 
@@ -65,6 +67,10 @@ SHAPE_LABELS = BETA_LABELS + LOCAL_NAMES
 # changes: the study's fits of 120 NHANES adults used -1.5..2.6; a margin on both sides.
 SHAPE_BOUNDS = ((0.0, 1.0), (-0.1, 0.85), (-0.5, 2.5)) + ((-2.0, 3.0),) * len(LOCAL_NAMES)
 BODY_DENSITY_KG_M3 = 1010.0
+# Anny's bodies cross themselves between the toes (46 triangle pairs) and at a man's eyelids (2); those
+# faces and this many rings around them (heavier bodies' toes cross a little further) are not pressed
+# or counted.
+TEMPLATE_CROSSING_RINGS = 3
 SUPPORTED_HEIGHT_PARAM = (0.12, 0.72)
 SUPPORTED_WEIGHT_PARAM = (0.0, 1.0)
 # Newton stops when both residuals are below these (far below what a garment fit can notice).
@@ -400,6 +406,18 @@ class BodyModel:
     def shape_volume_tensor(self) -> np.ndarray:
         """``(K, K, K)``: ``volume_tensor`` of ``basis`` (~1 s, made on first use)."""
         return volume_tensor(self.basis, self.faces)
+
+    @cached_property
+    def template_crossings(self) -> np.ndarray:
+        """``(F,) bool``: the faces where Anny's own bodies of average height and weight already cross
+        themselves (between the toes; the male eyelids), ``TEMPLATE_CROSSING_RINGS`` rings around: what
+        ``self_contact`` leaves as it is."""
+        marked = np.zeros(self.n_vertices, dtype=bool)
+        for gender in (0.0, 0.5, 1.0):
+            body = self.vertices(np.array([gender, DEFAULT_BETA[1], DEFAULT_BETA[2]]))
+            marked[self.faces[self_crossings(body, self.faces)].ravel()] = True
+        marked = dilate(marked, vertex_neighbours(self.faces, self.n_vertices), TEMPLATE_CROSSING_RINGS)
+        return frozen(marked[self.faces].any(axis=1))
 
     def as_shape(self, beta: np.ndarray) -> np.ndarray:
         """The extended shape ``(3 + L,)`` of beta ``(3,)``: no local change."""

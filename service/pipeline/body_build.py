@@ -10,6 +10,12 @@ the range possible): a height or BMI outside ``HEIGHT_RANGE_CM`` / ``BMI_RANGE``
 what adults of that height and weight have (``GirthPriors.possible_range``), or a combination the
 body cannot take within the tolerances.
 
+Where Anny grows a heavy body's parts through each other (the inner thighs of women from BMI ~32-38,
+breasts and belly folds, men's chests from BMI ~43-47: ``models/body/body_table.npz``'s ``crossings``),
+the mesh served is pressed into contact (``pressed_body``, ``service.geometry.self_contact``): one
+closed surface that does not cross itself, for the fields, the garments and the tape. The weight is
+solved again on the pressed mesh, and every measurement reported is read on it.
+
 The garment models were trained on the bodies of Anny's unextended (gender, height, weight) box
 (``body.shape_from_measurements``); a garment takes the code of the box body nearest in height and
 weight (``garment_beta``) and follows the shopper's own body through the canonical displacement
@@ -23,17 +29,19 @@ from functools import lru_cache
 
 import numpy as np
 
+from service.geometry.self_contact import Pressed, press_contacts, self_crossings
 from service.pipeline.body import (
     BodyModel,
     ShapeOutOfRange,
+    body_measurements,
     format_range,
     printed_bounds,
     shape_from_measurements,
     supported_height_range_cm,
     supported_weight_range_kg,
 )
-from service.pipeline.body_fit import GIVEN_SCALE, TOLERANCE, BodyFit, Target, evaluate, fit_shape
-from service.pipeline.body_table import HW_ROWS, LEVEL_COLUMNS, BodyTable, girths_at, with_height_and_weight
+from service.pipeline.body_fit import GIVEN_SCALE, TOLERANCE, BodyFit, Target, fit_shape
+from service.pipeline.body_table import LEVEL_COLUMNS, BodyTable, girths_at, with_height_and_weight
 from service.pipeline.girth_priors import GirthPriors
 from service.pipeline.measurements import BodyMeasurements, Landmarks, landmarks, measure
 
@@ -49,6 +57,14 @@ BODY_EVALUATIONS = 150
 TABLE_GENDERS = (0.0, 1.0)
 # Bodies kept per process: a shopper tries many outfits on one body (~0.1-1 s each to build, ~0.5 MB).
 BODY_CACHE = 256
+# Where a heavy body's parts cross (thighs, breasts, belly folds) they are pressed into contact this far
+# apart (m): the tape and the fields see one surface; the garments' own gap to the skin is 4 mm.
+CONTACT_GAP_M = 0.001
+# The pressed body loses the overlap its volume counted twice (1-3 % on the heaviest women), so its
+# weight is solved again, aiming that much higher, at most this many times; the pressed mesh must then
+# weigh within ``PRESSED_WEIGHT_SHARE`` of the request (a third of body_fit.TOLERANCE's 1 %).
+PRESS_SOLVES = 3
+PRESSED_WEIGHT_SHARE = 0.003
 # A rough start for the fit (Anny's height axis: 108.9 cm per unit, women 176.9 cm and men 190.9 cm at
 # 0.5; its weight axis, muscle 0.25: ~26 (women) and ~30 (men) BMI per unit above 0.5 at BMI 22 / 24).
 START = {"female": (176.9, 22.0, 26.0), "male": (190.9, 24.0, 30.0)}
@@ -73,15 +89,18 @@ class BodyRequest:
 
 @dataclass(frozen=True)
 class BuiltBody:
-    """A shopper's body: its extended ``shape (S,)``, the ``garment_beta (3,)`` garments take, what it
+    """A shopper's body: its extended ``shape (S,)``, its mesh ``vertices (V, 3)`` (the shape's, pressed
+    where its parts cross: ``pressed_body``), the ``garment_beta (3,)`` garments take, what the mesh
     measures, and the value each predicted girth was fitted to (name -> cm)."""
 
     shape: np.ndarray
+    vertices: np.ndarray = field(repr=False)
     garment_beta: np.ndarray
     measured: BodyMeasurements
     predicted: dict[str, float]
     given: tuple[str, ...]
     fit: BodyFit | None = field(repr=False)  # None: read from the table (``body_table``)
+    pressed: Pressed | None = field(default=None, repr=False)  # None: nothing crossed
 
     def report(self) -> dict:
         """The body as built, for the JSON report and the GLB (rounded to 0.1 cm / 0.1 kg)."""
@@ -224,48 +243,98 @@ def build_body(
         second = fit_shape(model, marks, first.shape, targets, frozenset(given), budget, first.measured)
         if second.reproduced:
             fit = second
-    if not fit.reproduced:
-        misses = [n for n in given if abs(getattr(fit.measured, n) - targets[n].value)
-                  > TOLERANCE[n] * (targets[n].value if n == "weight_kg" else 1.0)]  # fmt: skip
+    shape, vertices, pressed, measured = fit.shape, None, None, fit.measured
+    if fit.reproduced:
+
+        def refit(start: np.ndarray, aim_kg: float) -> np.ndarray | None:
+            aimed = targets | {"weight_kg": Target(aim_kg, targets["weight_kg"].scale)}
+            again = fit_shape(model, marks, start, aimed, frozenset(given), BODY_EVALUATIONS)
+            return again.shape if again.reproduced else None
+
+        done = pressed_body(model, fit.shape, request.weight_kg, refit)
+        if done is not None:
+            shape, vertices, pressed = done
+            if pressed is not None:
+                measured = measure(vertices, model.faces, marks)
+    misses = [n for n in given if abs(getattr(measured, n) - targets[n].value)
+              > TOLERANCE[n] * (targets[n].value if n == "weight_kg" else 1.0)]  # fmt: skip
+    if not fit.reproduced or vertices is None or misses:
+        misses = misses or ["weight_kg"]
         asked = ", ".join(f"{n}={targets[n].value:g}" for n in given)
-        closest = ", ".join(f"{n}={getattr(fit.measured, n):.1f}" for n in misses)
+        closest = ", ".join(f"{n}={getattr(measured, n):.1f}" for n in misses)
         field = misses[0]
         if field in GIRTHS:
             allowed = priors.possible_range(request.gender, field, request.height_cm, request.weight_kg)
         elif field == "weight_kg":  # as far as the body reached towards it
             lo, hi = weight_range_kg(request.height_cm)
-            reached = fit.measured.weight_kg
+            reached = measured.weight_kg
             allowed = (lo, reached) if request.weight_kg > reached else (reached, hi)
         else:
             allowed = HEIGHT_RANGE_CM
         message = f"no body has {', '.join(misses)} together as given ({asked}); closest built: {closest}"
         raise ShapeOutOfRange(field, message, allowed)
-    return BuiltBody(
-        fit.shape, garment_beta(model, request), fit.measured, predicted, tuple(request.given), fit
-    )
+    return BuiltBody(shape, vertices, garment_beta(model, request), measured, predicted, tuple(request.given),
+                     fit, pressed)  # fmt: skip
+
+
+def pressed_body(
+    model: BodyModel, shape: np.ndarray, weight_kg: float, solve, check: bool = True
+) -> tuple[np.ndarray, np.ndarray, Pressed | None] | None:
+    """``(shape, vertices (V, 3), pressed)``: the body of ``shape (S,)`` with its crossing parts pressed
+    into contact (``self_contact.press_contacts``; pressed None where nothing crosses, or ``check`` is
+    False: known not to), its weight solved again by ``solve(shape, aim_kg) -> shape | None`` so that
+    the pressed mesh weighs ``weight_kg`` (``PRESS_SOLVES``, ``PRESSED_WEIGHT_SHARE``); None when a
+    solve fails."""
+    faces, ignore = model.faces, model.template_crossings
+    vertices = model.shape_vertices(shape)
+    if not check or not len(self_crossings(vertices, faces, ignore)):
+        return shape, vertices, None
+    aim, offset = weight_kg, np.zeros_like(vertices)
+    for attempt in range(PRESS_SOLVES + 1):
+        # From the last pressing's offsets: the re-solved body crosses where it did (half the rounds).
+        pressed = press_contacts(vertices + offset, faces, CONTACT_GAP_M, ignore)
+        offset = pressed.vertices - vertices
+        _, mass = body_measurements(pressed.vertices, faces)
+        if abs(mass - weight_kg) <= PRESSED_WEIGHT_SHARE * weight_kg or attempt == PRESS_SOLVES:
+            return shape, pressed.vertices, pressed
+        aim += weight_kg - mass
+        shape = solve(shape, aim)
+        if shape is None:
+            return None
+        vertices = model.shape_vertices(shape)
+    raise AssertionError("unreachable")
 
 
 def _from_table(model, marks, table: BodyTable, request: BodyRequest, predicted: dict) -> BuiltBody | None:
     looked = table.lookup(request.gender, request.height_cm, request.weight_kg)
     if looked is None:
         return None
-    shape = with_height_and_weight(model, marks, looked[0], request.height_cm, request.weight_kg)
+    shape, levels_m, may_cross = looked
+    shape = with_height_and_weight(model, marks, shape, request.height_cm, request.weight_kg)
     if shape is None:
         return None
-    vertices = model.shape_vertices(shape)
-    if request.gender in TABLE_GENDERS:
-        (height, weight), _ = evaluate(model, marks, shape, HW_ROWS)
-        girths = girths_at(model, marks, vertices, looked[1])
+
+    def solve(start: np.ndarray, aim_kg: float) -> np.ndarray | None:
+        return with_height_and_weight(model, marks, start, request.height_cm, aim_kg)
+
+    done = pressed_body(model, shape, request.weight_kg, solve, check=may_cross)
+    if done is None:
+        return None
+    shape, vertices, pressed = done
+    if request.gender in TABLE_GENDERS and pressed is None:
+        height_m, weight = body_measurements(vertices, model.faces)
+        girths = girths_at(model, marks, vertices, levels_m)
         if girths is None:
             return None
-        levels = dict(zip(LEVEL_COLUMNS, looked[1].tolist(), strict=True))
-        measured = BodyMeasurements(height, weight, *girths, levels_m=levels)
-    else:  # a mixed body's landmarks are not the mix of the sexes' (its bust level: ~2 cm off)
+        levels = dict(zip(LEVEL_COLUMNS, levels_m.tolist(), strict=True))
+        measured = BodyMeasurements(100.0 * height_m, weight, *girths, levels_m=levels)
+    else:  # a mixed body's landmarks are not the mix of the sexes' (its bust level: ~2 cm off); a
+        # pressed body's largest chest girth can move to another level (a BMI 53 man's: 1.7 cm off)
         try:
             measured = measure(vertices, model.faces, marks)
         except ValueError:
             return None
-    return BuiltBody(shape, garment_beta(model, request), measured, predicted, (), None)
+    return BuiltBody(shape, vertices, garment_beta(model, request), measured, predicted, (), None, pressed)
 
 
 class BodyBuilder:

@@ -11,6 +11,9 @@ height and weight asked. For gender 0 or 1 its girths are read on its mesh by a 
 way, rather than searched for again: within ``GIRTH_AGREEMENT_CM`` of ``measure`` (tested on random
 requests), in ~7 ms instead of a fit's ~100-300 ms. A gender in between is measured (``measure``,
 ~30 ms): its landmarks are not the mix of the sexes' (its bust level was ~2 cm off, its chest 1.3 cm).
+The table also says which of its bodies cross themselves (``crossings``): only around those does the
+service test a body for crossings (~70 ms) and press it (``body_build.pressed_body``), and a pressed
+body is measured (its largest chest girth can move to another level).
 """
 
 from __future__ import annotations
@@ -39,25 +42,31 @@ HW_ROWS = [("height_cm", None), ("weight_kg", None)]
 @dataclass(frozen=True, eq=False)
 class BodyTable:
     """heights_cm (H,), bmis (B,); shapes (2, H, B, S), girths_cm (2, H, B, 4) and the heights they were
-    read at, levels_m (2, H, B, 4), for gender 0 and 1, NaN where the fit failed."""
+    read at, levels_m (2, H, B, 4), for gender 0 and 1, NaN where the fit failed; crossings (2, H, B):
+    how many triangle pairs each body's parts cross by (``self_contact``; None: unknown, test every
+    body)."""
 
     heights_cm: np.ndarray
     bmis: np.ndarray
     shapes: np.ndarray
     girths_cm: np.ndarray
     levels_m: np.ndarray
+    crossings: np.ndarray | None = None
 
     @classmethod
     def load(cls, path: Path | str) -> BodyTable:
         with np.load(path, allow_pickle=False) as npz:
             if tuple(npz["girth_columns"].tolist()) != GIRTH_COLUMNS:
                 raise ValueError(f"{path}: girth columns {npz['girth_columns']} are not {GIRTH_COLUMNS}")
-            return cls(npz["heights_cm"], npz["bmis"], npz["shapes"], npz["girths_cm"], npz["levels_m"])
+            crossings = npz["crossings"] if "crossings" in npz.files else None
+            return cls(npz["heights_cm"], npz["bmis"], npz["shapes"], npz["girths_cm"], npz["levels_m"],
+                       crossings)  # fmt: skip
 
     def lookup(
         self, gender: float, height_cm: float, weight_kg: float
-    ) -> tuple[np.ndarray, np.ndarray] | None:
-        """The interpolated shape ``(S,)`` and girths ``(4,)``, or None outside the grid or where a
+    ) -> tuple[np.ndarray, np.ndarray, bool] | None:
+        """The interpolated shape ``(S,)``, tape levels ``(4,)`` and whether the body may cross itself
+        (a body of the cell's corners, of a gender mixed in, does), or None outside the grid or where a
         corner of the cell failed to fit."""
         bmi = weight_kg / (height_cm / 100.0) ** 2
         cell = [_cell(self.heights_cm, height_cm), _cell(self.bmis, bmi)]
@@ -71,7 +80,12 @@ class BodyTable:
         if not (np.all(np.isfinite(shapes)) and np.all(np.isfinite(levels))):
             return None
         shapes[0] = gender
-        return shapes, levels
+        if self.crossings is None:
+            may_cross = True
+        else:
+            corners = self.crossings[mix > 0, i : i + 2, j : j + 2]
+            may_cross = bool(np.any(corners > 0))
+        return shapes, levels, may_cross
 
 
 def _cell(grid: np.ndarray, x: float) -> tuple[int, float] | None:

@@ -251,7 +251,7 @@ class ModelEngine:
         from service.pipeline.gltf import GltfLayer, outfit_glb
 
         built = self.body(spec)
-        vertices = self.models.body.shape_vertices(built.shape)
+        vertices = built.vertices
         layers = [GltfLayer("body", vertices, self.models.body.faces, extras={"body": built.report()})]
         return OutfitResult(outfit_glb(layers), {"body": built.report()}, layers)
 
@@ -260,7 +260,7 @@ class ModelEngine:
         from service.pipeline.outfit import make_outfit
 
         built = self.body(spec)
-        beta, body_vertices = built.garment_beta, self.models.body.shape_vertices(built.shape)
+        beta, body_vertices = built.garment_beta, built.vertices
         ids = list(spec.garments)
 
         def explicit_outfit():

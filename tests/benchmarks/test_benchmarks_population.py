@@ -101,7 +101,7 @@ def test_records_are_a_direct_count_of_the_service(builder, subset, recs, found)
                 assert r["outcome"] != "served"
                 continue
             assert r["outcome"] == "served"
-            tape = measure(builder.model.shape_vertices(built.shape), builder.model.faces, marks)
+            tape = measure(built.vertices, builder.model.faces, marks)
             assert r["hip_err_cm"] == pytest.approx(tape.hip_cm - hip, abs=1e-9)
             iliac = tape.waist_iliac_cm - p.columns["BMXWAIST"][i]
             assert r["iliac_err_cm"] == pytest.approx(iliac, abs=1e-9)

@@ -8,6 +8,7 @@ import math
 import numpy as np
 import pytest
 
+from service.geometry.self_contact import self_crossings
 from service.pipeline.body import SHAPE_BOUNDS, SUPPORTED_HEIGHT_PARAM, BodyModel, ShapeOutOfRange
 from service.pipeline.body_build import (
     BMI_RANGE,
@@ -19,6 +20,7 @@ from service.pipeline.body_build import (
 )
 from service.pipeline.body_fit import TOLERANCE
 from service.pipeline.girth_priors import MODELS, GirthPriors
+from service.pipeline.measurements import measure
 
 # Real-looking requests: a heavy short woman with her hip, a tall thin man, a woman giving all three
 # girths, a heavy man giving his waist.
@@ -53,6 +55,30 @@ def test_given_measurements_are_reproduced_and_missing_ones_reported(builder, re
     # The garments' code is a body of the trained box, as near in height and weight as it has.
     assert SUPPORTED_HEIGHT_PARAM[0] <= built.garment_beta[1] <= SUPPORTED_HEIGHT_PARAM[1]
     assert builder.build(request_) is built  # kept
+
+
+# The heaviest held-out NHANES adults (benchmarks.population's BMI tail, 2017-2020): their inner thighs,
+# breasts and belly cross as Anny grows them, and are pressed into contact.
+HEAVY = (
+    BodyRequest(1.0, 166.0, 180.1, hip_cm=176.9),  # BMI 65
+    BodyRequest(1.0, 161.0, 156.6, hip_cm=160.0),  # BMI 60
+    BodyRequest(0.0, 171.0, 157.3),  # BMI 54, no girth: the fit without the table
+)
+
+
+@pytest.mark.parametrize("request_", HEAVY)
+def test_a_heavy_body_is_one_surface_that_does_not_cross_itself(builder, request_):
+    """Pressed (``self_contact``): nothing crosses outside Anny's own toes, the given measurements are
+    still reproduced on the pressed mesh, which is what the report measures."""
+    built = builder.build(request_)
+    model = builder.model
+    assert built.pressed is not None and built.pressed.crossings == 0
+    assert len(self_crossings(built.vertices, model.faces, model.template_crossings)) == 0
+    assert len(self_crossings(model.shape_vertices(built.shape), model.faces, model.template_crossings)) > 0
+    tape = measure(built.vertices, model.faces, builder.marks)
+    for name in ("height_cm", "weight_kg", *request_.given):
+        assert _within(getattr(tape, name), getattr(request_, name), name), name
+        assert getattr(built.measured, name) == getattr(tape, name)
 
 
 def test_predicted_girths_are_met_about_as_well_as_the_prediction_knows_them(builder):
