@@ -28,7 +28,13 @@ def outfit_seconds(models, garments: list[str], body: list[float]) -> dict:
         from service.pipeline.body_build import BodyRequest
 
         built = models.bodies.build(BodyRequest(*body))
-        beta, extra = built.garment_beta, {"body_vertices": built.vertices}
+        try:  # the service's body as dressed (issue 55), in a tree that has it
+            from service.pipeline.dressed_body import dressed_vertices
+
+            vertices = dressed_vertices(models.body, built)
+        except ImportError:
+            vertices = models.body.shape_vertices(built.shape)
+        beta, extra = built.garment_beta, {"body_vertices": vertices}
     else:
         from service.pipeline.body import shape_from_measurements
 

@@ -200,12 +200,24 @@ def finite_layers(
     return out, flagged
 
 
+def _body_request(spec: OutfitSpec):
+    from service.pipeline.body_build import BodyRequest
+
+    girths = {k: getattr(spec, k) for k in GIRTH_FIELDS}
+    return BodyRequest(spec.gender, spec.height_cm, spec.weight_kg, **girths)
+
+
 class ModelEngine:
     """``Engine`` over ``service.pipeline.outfit.OutfitModels`` (thread-safe: onnxruntime sessions are)."""
 
     def __init__(self, models, version: str):
+        from functools import lru_cache
+
+        from service.pipeline.body_build import BODY_CACHE
+
         self.models = models
         self.model_version = version
+        self._dressed = lru_cache(maxsize=BODY_CACHE)(self._dressed_vertices)
 
     @classmethod
     def load(cls, models_dir: Path, threads: int, imported: list[Path] = ()) -> ModelEngine:
@@ -233,11 +245,21 @@ class ModelEngine:
 
     def body(self, spec: OutfitSpec):
         """The shopper's ``BuiltBody`` (``service.pipeline.body_build``), kept per process."""
-        from service.pipeline.body import ShapeOutOfRange, format_range
-        from service.pipeline.body_build import BodyRequest
+        return self._built(_body_request(spec))
 
-        request = BodyRequest(spec.gender, spec.height_cm, spec.weight_kg,
-                              **{k: getattr(spec, k) for k in GIRTH_FIELDS})
+    def dressed(self, spec: OutfitSpec) -> np.ndarray:
+        """``(V, 3)``: the shopper's body with room for cloth where its parts touch
+        (``service.pipeline.dressed_body``), kept per process."""
+        return self._dressed(_body_request(spec))
+
+    def _dressed_vertices(self, request) -> np.ndarray:
+        from service.pipeline.dressed_body import dressed_vertices
+
+        return dressed_vertices(self.models.body, self._built(request))
+
+    def _built(self, request):
+        from service.pipeline.body import ShapeOutOfRange, format_range
+
         try:
             return self.models.bodies.build(request)
         except ShapeOutOfRange as e:
@@ -260,7 +282,7 @@ class ModelEngine:
         from service.pipeline.outfit import make_outfit
 
         built = self.body(spec)
-        beta, body_vertices = built.garment_beta, built.vertices
+        beta, body_vertices = built.garment_beta, self.dressed(spec)
         ids = list(spec.garments)
 
         def explicit_outfit():
