@@ -93,7 +93,7 @@ def _pushes(vertices, faces, pairs, n_face, gap) -> tuple[np.ndarray, np.ndarray
     return np.concatenate(idx), np.concatenate(push)
 
 
-def near_on_surface(adjacency, a: np.ndarray, b: np.ndarray, rings: int) -> np.ndarray:
+def _near_on_surface(adjacency, a: np.ndarray, b: np.ndarray, rings: int) -> np.ndarray:
     """``(K,) bool``: vertex ``a[k]`` within ``rings`` rings of ``b[k]`` (``adjacency (V, V)``)."""
     n = adjacency.shape[0]
     reach = csr_matrix((np.ones(len(a)), (np.arange(len(a)), a)), shape=(len(a), n))
@@ -133,7 +133,7 @@ def press_contacts(
         rounds += 1
         # Two triangles a few edges apart that cross are one sheet folded (a crumpled armpit), not two
         # parts meeting: pushing them along each other's normals only folds it tighter; relaxing smooths.
-        meeting = ~near_on_surface(adjacency, faces[pairs[:, 0], 0], faces[pairs[:, 1], 0], FOLD_RINGS)
+        meeting = ~_near_on_surface(adjacency, faces[pairs[:, 0], 0], faces[pairs[:, 1], 0], FOLD_RINGS)
         idx, push = _pushes(x, faces, pairs[meeting], face_normals(x, faces), gap)
         move = np.zeros_like(x)
         count = np.zeros(len(x))

@@ -8,7 +8,7 @@ import pytest
 
 from service.geometry.mesh import vertex_normals
 from service.geometry.rings import vertex_neighbours
-from service.geometry.self_contact import FOLD_RINGS, near_on_surface, self_crossings
+from service.geometry.self_contact import FOLD_RINGS, _near_on_surface, self_crossings
 from service.pipeline.body_build import BodyRequest
 from service.pipeline.dressed_body import CLOTH_GAP_M, dressed_vertices, opened_faces
 from service.pipeline.models import OutfitModels
@@ -27,7 +27,7 @@ def _within(vertices: np.ndarray, faces: np.ndarray, keep: np.ndarray, distance:
     blown = vertices + 0.5 * distance * vertex_normals(vertices, faces)
     pairs = self_crossings(blown, faces, ~keep)
     adjacency = vertex_neighbours(faces, len(vertices))
-    fold = near_on_surface(adjacency, faces[pairs[:, 0], 0], faces[pairs[:, 1], 0], FOLD_RINGS)
+    fold = _near_on_surface(adjacency, faces[pairs[:, 0], 0], faces[pairs[:, 1], 0], FOLD_RINGS)
     return int(np.count_nonzero(~fold))
 
 
