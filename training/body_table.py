@@ -38,7 +38,7 @@ CACHE = REPO_ROOT / "build" / "body_table"
 
 @lru_cache(maxsize=1)
 def _builder() -> BodyBuilder:
-    return BodyBuilder(BodyModel.load(), GirthPriors.load())
+    return BodyBuilder(BodyModel.load(), GirthPriors.load(), press=False)
 
 
 def row(gender: float, height_cm: float) -> list[list[float]]:

@@ -24,6 +24,7 @@ weight (``garment_beta``) and follows the shopper's own body through the canonic
 
 from __future__ import annotations
 
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from functools import lru_cache
 
@@ -53,8 +54,9 @@ BMI_RANGE = (13.0, 70.0)
 # Residual evaluations a body's two fits may spend together: a bound on the time an impossible
 # combination takes to refuse (~2 s on 2 busy cores; a body NHANES has takes ~20-60).
 BODY_EVALUATIONS = 150
-# Genders whose girths are read at the table's levels; others are measured (``_from_table``).
-TABLE_GENDERS = (0.0, 1.0)
+# Measurements of table bodies run here, beside the request (``_from_table``): numpy and the tape's
+# kernels release the GIL.
+_MEASURE_POOL = ThreadPoolExecutor(max_workers=2, thread_name_prefix="body-measure")
 # Bodies kept per process: a shopper tries many outfits on one body (~0.1-1 s each to build, ~0.5 MB).
 BODY_CACHE = 256
 # Where a heavy body's parts cross (thighs, breasts, belly folds) they are pressed into contact this far
@@ -96,11 +98,22 @@ class BuiltBody:
     shape: np.ndarray
     vertices: np.ndarray = field(repr=False)
     garment_beta: np.ndarray
-    measured: BodyMeasurements
+    measurement: BodyMeasurements | Future  # a Future: being measured (``measured`` waits for it)
     predicted: dict[str, float]
     given: tuple[str, ...]
     fit: BodyFit | None = field(repr=False)  # None: read from the table (``body_table``)
     pressed: Pressed | None = field(default=None, repr=False)  # None: nothing crossed
+
+    @property
+    def measured(self) -> BodyMeasurements:
+        """What the mesh measures (waits for a measurement still running: ``_from_table``)."""
+        m = self.measurement
+        if not isinstance(m, Future):
+            return m
+        try:
+            return m.result()
+        except ValueError as e:  # the table's bodies all measure; kept from turning into a 500
+            raise ShapeOutOfRange("weight_kg", f"this body could not be measured: {e}") from None
 
     def report(self) -> dict:
         """The body as built, for the JSON report and the GLB (rounded to 0.1 cm / 0.1 kg)."""
@@ -216,9 +229,12 @@ def build_body(
     priors: GirthPriors,
     request: BodyRequest,
     table: BodyTable | None = None,
+    press: bool = True,
 ) -> BuiltBody:
     """The shopper's body (module docstring); raises ``ShapeOutOfRange``. A request without girths is
     read from ``table`` when given (``body_table``, ~2 ms), fitted where the table has no body for it.
+    ``press`` False: the fitted shape's mesh as it is, crossing or not (what the table stores: it is
+    pressed when read).
 
     Two fits: the given measurements alone, then from there with the predicted girths too, kept when it
     still reproduces the given ones. Started cold with the predictions, the fit fell into a local
@@ -251,7 +267,7 @@ def build_body(
             again = fit_shape(model, marks, start, aimed, frozenset(given), BODY_EVALUATIONS)
             return again.shape if again.reproduced else None
 
-        done = pressed_body(model, fit.shape, request.weight_kg, refit)
+        done = pressed_body(model, fit.shape, request.weight_kg, refit, check=press)
         if done is not None:
             shape, vertices, pressed = done
             if pressed is not None:
@@ -321,32 +337,38 @@ def _from_table(model, marks, table: BodyTable, request: BodyRequest, predicted:
     if done is None:
         return None
     shape, vertices, pressed = done
-    if request.gender in TABLE_GENDERS and pressed is None:
+    read = pressed is None and request.gender in table.genders
+    # The mesh is measured beside the outfit the request asks for (report only: the garments do not
+    # need it): 3-25 ms off the request's path, a body without an outfit waits for it.
+    measuring = _MEASURE_POOL.submit(_table_measurement, model, marks, vertices, levels_m if read else None)
+    return BuiltBody(shape, vertices, garment_beta(model, request), measuring, predicted, (), None, pressed)
+
+
+def _table_measurement(model, marks, vertices: np.ndarray, levels_m: np.ndarray | None) -> BodyMeasurements:
+    """A table body's measurements: read at the table's ``levels_m``, or measured where they are None
+    (a gender in between: its landmarks are not the mix of the sexes', its bust level ~2 cm off; a
+    pressed body: its largest chest girth can move to another level, a BMI 53 man's 1.7 cm off) or a
+    level finds no torso."""
+    girths = None if levels_m is None else girths_at(model, marks, vertices, levels_m)
+    if girths is not None:
         height_m, weight = body_measurements(vertices, model.faces)
-        girths = girths_at(model, marks, vertices, levels_m)
-        if girths is None:
-            return None
         levels = dict(zip(LEVEL_COLUMNS, levels_m.tolist(), strict=True))
-        measured = BodyMeasurements(100.0 * height_m, weight, *girths, levels_m=levels)
-    else:  # a mixed body's landmarks are not the mix of the sexes' (its bust level: ~2 cm off); a
-        # pressed body's largest chest girth can move to another level (a BMI 53 man's: 1.7 cm off)
-        try:
-            measured = measure(vertices, model.faces, marks)
-        except ValueError:
-            return None
-    return BuiltBody(shape, vertices, garment_beta(model, request), measured, predicted, (), None, pressed)
+        return BodyMeasurements(100.0 * height_m, weight, *girths, levels_m=levels)
+    return measure(vertices, model.faces, marks)
 
 
 class BodyBuilder:
     """``build_body`` on one body model and its priors, the last ``BODY_CACHE`` bodies kept."""
 
-    def __init__(self, model: BodyModel, priors: GirthPriors, table: BodyTable | None = None):
-        self.model, self.priors, self.table = model, priors, table
+    def __init__(
+        self, model: BodyModel, priors: GirthPriors, table: BodyTable | None = None, press: bool = True
+    ):
+        self.model, self.priors, self.table, self.press = model, priors, table, press
         self.marks = landmarks(model)
         self.build = lru_cache(maxsize=BODY_CACHE)(self._build)
 
     def _build(self, request: BodyRequest) -> BuiltBody:
-        return build_body(self.model, self.marks, self.priors, request, self.table)
+        return build_body(self.model, self.marks, self.priors, request, self.table, self.press)
 
     def ranges(self, gender: float, height_cm: float | None, weight_kg: float | None) -> dict:
         """What ``check_request`` accepts: heights, the weights at ``height_cm`` (clamped into the

@@ -6,11 +6,12 @@ grid of heights and BMIs covering the served range, the shape ``build_body`` fit
 weight alone and the girths ``measure`` reads on it. A request's shape is the table's, interpolated
 bilinearly in (height, BMI) and linearly in gender; its height and weight phenotypes are then solved
 by Newton's method with exact derivatives (``body_fit.evaluate``) so that the body has exactly the
-height and weight asked. For gender 0 or 1 its girths are read on its mesh by a tape
-(``girth.tape_girths``) at the heights ``measure`` picked on the table's bodies, interpolated the same
-way, rather than searched for again: within ``GIRTH_AGREEMENT_CM`` of ``measure`` (tested on random
-requests), in ~7 ms instead of a fit's ~100-300 ms. A gender in between is measured (``measure``,
-~30 ms): its landmarks are not the mix of the sexes' (its bust level was ~2 cm off, its chest 1.3 cm).
+height and weight asked, in ~3 ms instead of a fit's ~100-300 ms. For a gender of the table its girths
+are read on its mesh by a tape (``girth.tape_girths``) at the heights ``measure`` picked on the
+table's bodies, interpolated the same way, rather than searched for again: within
+``GIRTH_AGREEMENT_CM`` of ``measure`` (tested on random requests), ~4 ms. A gender in between is
+measured (``measure``, ~25 ms): its landmarks are not the mix of the sexes' (its bust level was ~2 cm
+off, its chest 1.3 cm). Either runs beside the outfit (``body_build``).
 The table also says which of its bodies cross themselves (``crossings``): only around those does the
 service test a body for crossings (~70 ms) and press it (``body_build.pressed_body``), and a pressed
 body is measured (its largest chest girth can move to another level).
@@ -41,11 +42,11 @@ HW_ROWS = [("height_cm", None), ("weight_kg", None)]
 
 @dataclass(frozen=True, eq=False)
 class BodyTable:
-    """heights_cm (H,), bmis (B,); shapes (2, H, B, S), girths_cm (2, H, B, 4) and the heights they were
-    read at, levels_m (2, H, B, 4), for gender 0 and 1, NaN where the fit failed; crossings (2, H, B):
-    how many triangle pairs each body's parts cross by (``self_contact``; None: unknown, test every
-    body)."""
+    """genders (G,), heights_cm (H,), bmis (B,); shapes (G, H, B, S), girths_cm (G, H, B, 4) and the
+    heights they were read at, levels_m (G, H, B, 4), NaN where the fit failed; crossings (G, H, B): how
+    many triangle pairs each body's parts cross by (``self_contact``; None: unknown, test every body)."""
 
+    genders: np.ndarray
     heights_cm: np.ndarray
     bmis: np.ndarray
     shapes: np.ndarray
@@ -59,8 +60,8 @@ class BodyTable:
             if tuple(npz["girth_columns"].tolist()) != GIRTH_COLUMNS:
                 raise ValueError(f"{path}: girth columns {npz['girth_columns']} are not {GIRTH_COLUMNS}")
             crossings = npz["crossings"] if "crossings" in npz.files else None
-            return cls(npz["heights_cm"], npz["bmis"], npz["shapes"], npz["girths_cm"], npz["levels_m"],
-                       crossings)  # fmt: skip
+            return cls(npz["genders"], npz["heights_cm"], npz["bmis"], npz["shapes"], npz["girths_cm"],
+                       npz["levels_m"], crossings)  # fmt: skip
 
     def lookup(
         self, gender: float, height_cm: float, weight_kg: float
@@ -69,12 +70,13 @@ class BodyTable:
         (a body of the cell's corners, of a gender mixed in, does), or None outside the grid or where a
         corner of the cell failed to fit."""
         bmi = weight_kg / (height_cm / 100.0) ** 2
-        cell = [_cell(self.heights_cm, height_cm), _cell(self.bmis, bmi)]
+        cell = [_cell(self.genders, gender), _cell(self.heights_cm, height_cm), _cell(self.bmis, bmi)]
         if None in cell:
             return None
-        (i, a), (j, b) = cell
+        (k, c), (i, a), (j, b) = cell
         w = np.array([[(1 - a) * (1 - b), (1 - a) * b], [a * (1 - b), a * b]])  # (2, 2)
-        mix = np.array([1.0 - gender, gender])
+        mix = np.zeros(len(self.genders))  # (G,): linear in gender between the two nearest
+        mix[k : k + 2] = (1.0 - c, c)
         shapes = np.einsum("g,hb,ghbs->s", mix, w, self.shapes[:, i : i + 2, j : j + 2])
         levels = np.einsum("g,hb,ghbs->s", mix, w, self.levels_m[:, i : i + 2, j : j + 2])
         if not (np.all(np.isfinite(shapes)) and np.all(np.isfinite(levels))):

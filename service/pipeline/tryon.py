@@ -200,6 +200,17 @@ def finite_layers(
     return out, flagged
 
 
+def _refused_as_invalid(build):
+    """``build()``, a body refusal (``ShapeOutOfRange``) raised as ``InvalidField`` (a 422)."""
+    from service.pipeline.body import ShapeOutOfRange, format_range
+
+    try:
+        return build()
+    except ShapeOutOfRange as e:
+        allowed = "a finite number" if e.allowed is None else format_range(*e.allowed)
+        raise InvalidField(f"body.{e.field}", str(e), allowed) from None
+
+
 def _body_request(spec: OutfitSpec):
     from service.pipeline.body_build import BodyRequest
 
@@ -258,13 +269,11 @@ class ModelEngine:
         return dressed_vertices(self.models.body, self._built(request))
 
     def _built(self, request):
-        from service.pipeline.body import ShapeOutOfRange, format_range
+        return _refused_as_invalid(lambda: self.models.bodies.build(request))
 
-        try:
-            return self.models.bodies.build(request)
-        except ShapeOutOfRange as e:
-            allowed = "a finite number" if e.allowed is None else format_range(*e.allowed)
-            raise InvalidField(f"body.{e.field}", str(e), allowed) from None
+    def body_report(self, built) -> dict:
+        """``built.report()``, waiting for its measurement; a body that cannot be measured is a 422."""
+        return _refused_as_invalid(built.report)
 
     def body_ranges(self, gender: float, height_cm: float | None, weight_kg: float | None = None) -> dict:
         return self.models.bodies.ranges(gender, height_cm, weight_kg)
@@ -274,8 +283,9 @@ class ModelEngine:
 
         built = self.body(spec)
         vertices = built.vertices
-        layers = [GltfLayer("body", vertices, self.models.body.faces, extras={"body": built.report()})]
-        return OutfitResult(outfit_glb(layers), {"body": built.report()}, layers)
+        report = self.body_report(built)
+        layers = [GltfLayer("body", vertices, self.models.body.faces, extras={"body": report})]
+        return OutfitResult(outfit_glb(layers), {"body": report}, layers)
 
     def make(self, spec: OutfitSpec) -> OutfitResult:
         from service.pipeline.gltf import outfit_glb
@@ -304,8 +314,9 @@ class ModelEngine:
             garments, bad = finite_layers(garments, explicit)
             flagged += bad
         body = (outfit.body_vertices, outfit.body_faces) if spec.include_body else None
-        layers = glb_layers(garments, self.models.catalog, body, {"body": built.report()})
-        report = dict(outfit.report) | {"body": built.report()}
+        body_report = self.body_report(built)
+        layers = glb_layers(garments, self.models.catalog, body, {"body": body_report})
+        report = dict(outfit.report) | {"body": body_report}
         report["numerical_fallback"] = flagged
         report["garments_served"] = [g for g, _, _ in garments]
         return OutfitResult(outfit_glb(layers), report, layers)

@@ -29,7 +29,8 @@ def _requests(n: int, seed: int) -> list[BodyRequest]:
     for _ in range(n):
         height = rng.uniform(142.0, 205.0)
         bmi = rng.uniform(16.0, 55.0)
-        out.append(BodyRequest(float(rng.choice([0.0, 1.0, 0.5])), height, bmi * (height / 100.0) ** 2))
+        gender = float(rng.choice([0.0, 1.0, rng.uniform(0.0, 1.0)]))  # the sexes, and any in between
+        out.append(BodyRequest(gender, height, bmi * (height / 100.0) ** 2))
     return out
 
 
@@ -67,7 +68,8 @@ def test_lookup_outside_the_grid_or_in_a_failed_cell_is_none(parts):
     assert table.lookup(1.0, 170.0, (table.bmis[-1] + 1.0) * 1.7**2) is None
     shapes = table.shapes.copy()
     shapes[1, 10, 10, 0] = np.nan
-    broken = BodyTable(table.heights_cm, table.bmis, shapes, table.girths_cm, table.levels_m, table.crossings)
+    broken = BodyTable(table.genders, table.heights_cm, table.bmis, shapes, table.girths_cm, table.levels_m,
+                       table.crossings)
     h = (table.heights_cm[10] + table.heights_cm[11]) / 2
     b = (table.bmis[10] + table.bmis[11]) / 2
     assert broken.lookup(1.0, h, b * (h / 100) ** 2) is None
@@ -82,16 +84,17 @@ def test_a_body_between_table_bodies_that_do_not_cross_does_not_cross(parts):
     flagged = table.crossings > 0
     # cells with no crossing corner but a crossing neighbour cell: the edge of where pressing begins
     checked = 0
-    for g in (0, 1):
+    for g in range(len(table.genders)):
         edge = [(i, j) for i in range(len(table.heights_cm) - 1) for j in range(1, len(table.bmis) - 2)
                 if not flagged[g, i : i + 2, j : j + 2].any() and flagged[g, i : i + 2, j + 2].any()]
         for k in rng.choice(len(edge), size=min(3, len(edge)), replace=False):
             i, j = edge[k]
             h = float(np.mean(table.heights_cm[i : i + 2]))
             b = float(np.mean(table.bmis[j : j + 2]))
-            shape, _, may_cross = table.lookup(float(g), h, b * (h / 100) ** 2)
+            gender = float(table.genders[g])
+            shape, _, may_cross = table.lookup(gender, h, b * (h / 100) ** 2)
             assert not may_cross
-            built = build_body(model, marks, priors, BodyRequest(float(g), h, b * (h / 100) ** 2), table)
+            built = build_body(model, marks, priors, BodyRequest(gender, h, b * (h / 100) ** 2), table)
             assert len(self_crossings(built.vertices, model.faces, model.template_crossings)) == 0
             checked += 1
     assert checked >= 2
