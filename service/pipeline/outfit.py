@@ -77,6 +77,7 @@ def make_outfit(
     repair: bool = True,
     collisions: CollisionSettings = SETTINGS,
     body_vertices: np.ndarray | None = None,
+    started: float | None = None,
 ) -> Outfit:
     """Dress the body of shape ``beta (3,)`` in ``garment_ids`` (inner to outer); ``body_vertices (V, 3)``,
     when given, is the body instead (a shopper's own, ``body_build``), ``beta`` the code its garments
@@ -105,15 +106,20 @@ def make_outfit(
     how = _How(untangle_layers, untangler, settings, body_field, repair, collisions)
     attempts: list[_Attempt] = []
     passes_left = collisions.pass_budget
+    # The request's clock (``started``: its ``time.perf_counter()``, the body's build before this
+    # included) bounds its passes too (CollisionSettings.pass_seconds).
+    deadline = (t_total if started is None else started) + collisions.pass_seconds
     for room in collisions.rooms:
         t0 = time.perf_counter()
         explicit, lowered = _let_down(models, garment_ids, unshifted, room)
         seconds["explicit"] += time.perf_counter() - t0
         meshes = (unshifted, explicit, lowered)
-        attempt = _layered(models, garment_ids, beta, body, meshes, faces, seconds, how, passes_left)
+        attempt = _layered(models, garment_ids, beta, body, meshes, faces, seconds, how, passes_left,
+                           deadline)  # fmt: skip
         attempts.append(attempt)
         passes_left -= attempt.passes
-        if attempt.faults == (0, 0) or not any(lowered) or passes_left <= 0:
+        late = time.perf_counter() > deadline
+        if attempt.faults == (0, 0) or not any(lowered) or passes_left <= 0 or late:
             break
     chosen = min(attempts, key=lambda a: a.faults)  # the first of the fewest faults
     layer_ids = [BODY, *garment_ids]
@@ -215,11 +221,13 @@ class _How:
 
 
 def _layered(
-    models, garment_ids, beta, body, meshes, faces, seconds: dict, how: _How, pass_limit: int
+    models, garment_ids, beta, body, meshes, faces, seconds: dict, how: _How, pass_limit: int,
+    deadline: float | None = None,
 ) -> _Attempt:
     """The fit, the body map and the repair of one ``_let_down``'s explicit meshes: ``meshes`` is (the
     explicit meshes before any junction moved them, after, how far each moved). The time of each stage
-    is added to ``seconds``; the repair runs at most ``pass_limit`` passes."""
+    is added to ``seconds``; the repair runs at most ``pass_limit`` passes, none starting after
+    ``deadline`` but the first."""
     unshifted, explicit, lowered = meshes
     untangle_layers, untangler, settings = how.untangle_layers, how.untangler, how.settings
     body_field, repair, collisions = how.body_field, how.repair, how.collisions
@@ -267,7 +275,7 @@ def _layered(
         stack = Stack(faces, anchors, _segment_test(models, garment_ids), _fields_of(models, layer_ids, beta))
         body_mesh = ClosestPoint.build(body, models.body.faces)
         resolved = resolve(stack, body_mesh, explicit, Fitted(fitted, cache), world, lowered, collisions,
-                           pass_limit)  # fmt: skip
+                           pass_limit, deadline)  # fmt: skip
         world, repairs, passes = resolved.meshes, resolved.repairs, resolved.passes
         add("repair", time.perf_counter() - t0)
     return _Attempt(explicit, fits, fitted, fit_world, world, repairs, passes)

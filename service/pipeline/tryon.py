@@ -11,6 +11,7 @@ from __future__ import annotations
 import hashlib
 import json
 import logging
+import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Literal, Protocol
@@ -291,6 +292,7 @@ class ModelEngine:
         from service.pipeline.gltf import outfit_glb
         from service.pipeline.outfit import make_outfit
 
+        started = time.perf_counter()  # the passes' deadline counts the body's build (pass_seconds)
         built = self.body(spec)
         beta, body_vertices = built.garment_beta, self.dressed(spec)
         ids = list(spec.garments)
@@ -302,7 +304,7 @@ class ModelEngine:
         flagged: list[str] = []
         try:
             outfit = make_outfit(self.models, ids, beta, spec.untangle, spec.untangler, measure=spec.measure,
-                                 body_vertices=body_vertices)
+                                 body_vertices=body_vertices, started=started)
         except NUMERICAL_ERRORS as e:
             if not spec.untangle:
                 raise

@@ -310,7 +310,7 @@ def test_a_let_down_outfit_left_crossing_is_made_again_with_the_next_room(models
     lowering = models.pairs.lowering
     monkeypatch.setattr(models.pairs, "lowering", lambda *a: rooms.append(a[4]) or lowering(*a))
 
-    def resolve(stack, body, explicit, fitted, world, lowered, settings, pass_limit):
+    def resolve(stack, body, explicit, fitted, world, lowered, settings, pass_limit, deadline):
         limits.append(pass_limit)
         n = left[len(calls)]
         calls.append(([x.copy() for x in explicit], world))
@@ -355,3 +355,31 @@ def test_the_pass_budget_bounds_the_passes_of_every_attempt(models):
         assert report["passes"] <= max(budget, report["attempts"])
         assert report["attempts"] <= budget
         assert report["crossing_pairs"] >= 0
+
+
+def test_no_pass_starts_after_the_requests_deadline(models, monkeypatch):
+    """A request whose clock has run past ``pass_seconds`` (its body's build, say) still gets its first
+    squeeze-and-repair pass, and no other: no further pass, no other room. The stub counts them."""
+    import time
+
+    from service.pipeline import outfit
+    from service.pipeline.collisions import passes
+
+    seen = []
+    real = passes.resolve
+
+    def resolve(*args):
+        out = real(*args)
+        seen.append((args[-1], out.passes))
+        return out
+
+    monkeypatch.setattr(outfit, "resolve", resolve)
+    ids = ["pants", "jacket", "tshirt", "long_sleeve"]  # against the grain: let down, many passes
+    beta = sample_betas(2, 3)[1]
+    late = time.perf_counter() - SETTINGS.pass_seconds - 1.0
+    r = make_outfit(models, ids, beta, measure=False, started=late)
+    assert len(seen) == 1 and seen[0][1] == 1 and r.report["passes"] == 1
+    seen.clear()
+    r = make_outfit(models, ids, beta, measure=False)  # on time: as many as it needs
+    assert seen[0][0] > time.perf_counter() - SETTINGS.pass_seconds
+    assert r.report["passes"] == sum(p for _, p in seen) > 1  # the deadline is what stopped it above

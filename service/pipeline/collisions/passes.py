@@ -9,6 +9,7 @@ from the fields at the fitted canonical vertices (``Fitted.field_at``).
 
 from __future__ import annotations
 
+import time
 from concurrent.futures import Future
 from dataclasses import dataclass, field, fields, replace
 
@@ -45,7 +46,8 @@ class Resolved:
 
 def resolve(stack: Stack, body: ClosestPoint, explicit: list[np.ndarray], fitted: Fitted,
             world: list[np.ndarray], lowered: list[float] | None = None,
-            settings: CollisionSettings = SETTINGS, pass_limit: int | None = None) -> Resolved:  # fmt: skip
+            settings: CollisionSettings = SETTINGS, pass_limit: int | None = None,
+            deadline: float | None = None) -> Resolved:  # fmt: skip
     """The squeeze then the repair of the fitted world meshes ``world`` (per garment ``(V_i, 3)``, on the
     body mesh ``body``); where faults are left, again, up to ``settings.passes`` times in each of
     ``settings.ways``, a pass of each in turn, until one comes out clean. A way stops after
@@ -56,7 +58,8 @@ def resolve(stack: Stack, body: ClosestPoint, explicit: list[np.ndarray], fitted
     the explicit canonical meshes the fields were learned on. ``lowered``: per garment, how far (m) its
     explicit mesh was let down from the one its fields know (``collisions.junctions``), which widens
     where the garments over it look for it. ``pass_limit``: at most this many passes (at least one),
-    what is left of a request's ``settings.pass_budget``."""
+    what is left of a request's ``settings.pass_budget``; ``deadline``: no pass after the first starts
+    once ``time.perf_counter()`` has passed it (``settings.pass_seconds``)."""
     lowered = lowered or [0.0] * len(world)
     limit = max(1, pass_limit if pass_limit is not None else settings.pass_budget)
     best, run = None, 0
@@ -65,7 +68,7 @@ def resolve(stack: Stack, body: ClosestPoint, explicit: list[np.ndarray], fitted
         for chain in chains:
             if chain.stale >= settings.pass_patience:
                 continue
-            if run == limit:
+            if run == limit or (run and deadline is not None and time.perf_counter() > deadline):
                 return replace(best, passes=run)
             squeezed = _squeeze(stack, fitted, chain.start, body, chain.deep, chain.pressed, chain.way,
                                 settings)  # fmt: skip

@@ -176,6 +176,12 @@ class CollisionSettings:
     passes in 3 rooms, 23-31 s on 2 cores, past the service's 30 s deadline; a pass of four garments
     costs ~0.5-0.7 s on 2 quiet cores, so 12 keep those outfits under 10 s (``python -m
     benchmarks.worst_case``, docs/collisions.md)."""
+    pass_seconds: float = 8.0
+    """s after a request began (its body's build included) past which no squeeze-and-repair pass starts:
+    with ``pass_budget``, the bound on its time. The passes cost twice as much on the heaviest bodies:
+    with the pass budget alone, 4-garment stacks worn against the grain on a BMI 60 woman took 19-25 s
+    on 2 quiet cores (her body's first build ~5 s), a BMI 59 man's 11-15 s; a last pass there takes up
+    to ~2 s, so passes stop starting at 8 s for 10 s (``python -m benchmarks.worst_case``)."""
     deepen: float = 0.002
     """m: how much deeper, each pass, the squeeze presses an inner garment under an outer one where the
     repair left them crossing; lifting the outer one is all the repair can do, and over the gathered
