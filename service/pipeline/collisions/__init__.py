@@ -11,9 +11,10 @@ Contract (``docs/collisions.md`` has it with pictures):
   outfit with the fewest crossing pairs, then vertices inside, and return it; the report's
   ``collision_free`` is true only when that outfit has none. What is tried, at most (the retry budget, in
   ``settings.CollisionSettings``): ``rooms`` (3) let-down rooms x ``ways`` (2) x ``passes`` (6) passes
-  x ``repair_rounds`` (24) rounds per garment, and at most ``pass_budget`` (12) passes over all the
-  attempts of a request (a deterministic bound on its time); an outfit that comes out clean stops at
-  once, and the usual orders (nothing let down) are made with one room and one pass.
+  x ``repair_rounds`` (24) rounds per garment, at most ``pass_budget`` (12) passes over all the
+  attempts of a request, and none but the first starting ``pass_seconds`` (8 s) after the request began
+  (the bound on its time: within 10 s on 2 cores, ``benchmarks.worst_case``); an outfit that comes out
+  clean stops at once, and the usual orders (nothing let down) are made with one room and one pass.
 - **Refused before any of it**: orders cloth cannot take (``layering.LayeringRule.refusals``: a skirt
   over pants' legs, a garment too tight for what is under it), answered 422 by the service.
 
