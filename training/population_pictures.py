@@ -18,6 +18,7 @@ import numpy as np
 
 from benchmarks import population
 from service.pipeline.body_build import BodyRequest
+from service.pipeline.dressed_body import dressed_vertices
 from service.pipeline.models import OutfitModels
 from service.pipeline.outfit import make_outfit
 from service.process.paths import REPO_ROOT
@@ -80,7 +81,8 @@ def main(argv: list[str] | None = None) -> None:
                 [MeshLayer(v, models.body.faces, PALETTE["skin"])], ("front", "side"), args.size, title=title
             )
         )
-        outfit = make_outfit(models, list(OUTFIT), built.garment_beta, measure=False, body_vertices=v)
+        worn = dressed_vertices(models.body, built)  # as the service dresses it: contacts opened for cloth
+        outfit = make_outfit(models, list(OUTFIT), built.garment_beta, measure=False, body_vertices=worn)
         red, pairs = crossing_layer(outfit)
         layers = layers_of(outfit) + ([red] if red is not None else [])
         dressed.append(render_views(layers, ("front", "side"), args.size, title=f"{title}, {pairs} crossing"))
