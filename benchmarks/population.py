@@ -416,7 +416,8 @@ def tail_people(populations: dict[str, Population], per_tail: int) -> list[tuple
 def outfit_records(populations: dict[str, Population], per_tail: int) -> list[dict]:
     """Each tail adult (``tail_people``) dressed in the next of ``TAIL_OUTFITS`` by the service's own
     engine: clean by the exact count of crossing pairs between every two layers of the returned meshes
-    (the report's ``intersections_after``), what the report's ``collision_free`` said, and the body and
+    and of vertices inside an inner layer (the report's ``intersections_after`` and
+    ``penetration_after``), what the report's ``collision_free`` said, and the body and
     outfit times (ms, this process, warm caches; the outfit's with those measures)."""
     from service.pipeline.tryon import ModelEngine, OutfitSpec
 
@@ -435,7 +436,8 @@ def outfit_records(populations: dict[str, Population], per_tail: int) -> list[di
         outfit_ms = 1e3 * (time.perf_counter() - start) - body_ms
         out.append({"tail": tail, "sex": sex, "bmi": float(p.bmi[i]), "height_cm": float(p.height_cm[i]),
                     "garments": len(garments), "said_clean": bool(result.report.get("collision_free")),
-                    "clean": sum(result.report["intersections_after"].values()) == 0,
+                    "clean": sum(result.report["intersections_after"].values()) == 0
+                    and sum(result.report["penetration_after"].values()) == 0,
                     "body_ms": body_ms, "outfit_ms": outfit_ms})  # fmt: skip
     return out
 

@@ -237,3 +237,30 @@ def test_faces_around_are_those_with_a_vertex_in_the_grown_box():
     got = _faces_around(mesh, corners, 0.01)
     np.testing.assert_array_equal(got, np.flatnonzero(inside[inner_f].any(axis=1)))
     assert 0 < len(got) < len(inner_f)
+
+
+def test_triangles_the_canonical_fields_miss_are_near_in_world():
+    """A coarse sheet crossing a closed ball, and another farther than reach, with no vertex called
+    near (as where the body map squeezes a heavy armpit): the crossing triangles' corners are near,
+    every vertex left out is farther than reach, a vertex deep inside the ball is near, the far sheet
+    is not, and what was near stays near."""
+    from service.pipeline.collisions.passes import _FinalLayer, near_in_world
+
+    ball = trimesh.creation.icosphere(subdivisions=4, radius=0.1)
+    body = _FinalLayer(ClosestPoint.build(np.asarray(ball.vertices), np.asarray(ball.faces)), True, 0.0)
+    reach = SETTINGS.reach
+    # 6 cm triangles through the ball's top: some corners lie farther than reach from the sphere.
+    v, f = _sheet(4, 0.24, lambda v: 0.09 + 0.0 * v[:, 0])
+    crossing = intersecting_pairs(v, f, body.mesh.vertices, body.mesh.faces)
+    assert len(crossing)
+    near = near_in_world(v, f, body, np.zeros(len(v), dtype=bool), reach)
+    assert near[f[crossing[:, 0]]].all()
+    assert (np.abs(body.mesh.query(v[~near]).signed) > reach).all()
+    far_v, far_f = _sheet(6, 0.24, lambda v: 0.1 + reach + 0.02 + 0.0 * v[:, 0])  # 5.7 cm edges
+    assert not near_in_world(far_v, far_f, body, np.zeros(len(far_v), dtype=bool), reach).any()
+    inside = np.array([[0.0, 0.0, 0.0], [0.001, 0.0, 0.0], [0.0, 0.001, 0.0], [0.5, 0.5, 0.5]])
+    tri = np.array([[0, 1, 2]])
+    assert near_in_world(inside, tri, body, np.zeros(4, dtype=bool), reach)[:3].all()
+    kept = np.zeros(len(far_v), dtype=bool)
+    kept[:5] = True
+    np.testing.assert_array_equal(near_in_world(far_v, far_f, body, kept, reach), kept)
