@@ -259,14 +259,7 @@ def tape_girth(vertices: np.ndarray, faces: np.ndarray, z: float, select: np.nda
     return polyline_length(tape_loop(vertices, faces, z, select))
 
 
-def tape_girths(
-    vertices: np.ndarray, faces: np.ndarray, zs: np.ndarray, select: np.ndarray
-) -> tuple[np.ndarray, list[np.ndarray]]:
-    """``tape_girth`` at each height of ``zs (L,)`` around ``select``, one point ``(2,)`` for all
-    heights or one per height ``(L, 2)``: girths ``(L,)`` and the tapes' hulls (a list of L ``(H, 2)``).
-    A height where no loop goes around its point gives NaN and an empty ``(0, 2)`` hull instead of
-    raising. Checks and sorts the mesh once."""
-    slicer = _Slicer(vertices, faces, sort=np.size(zs) > FEW_LEVELS)
+def _checked_levels(zs: np.ndarray, select: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     zs = np.asarray(zs, dtype=np.float64).reshape(-1)
     if not np.all(np.isfinite(zs)):
         raise ValueError("zs must be finite")
@@ -275,6 +268,43 @@ def tape_girths(
     _check_points(sel)
     if len(sel) != len(zs):
         raise ValueError(f"select must be (2,) or ({len(zs)}, 2), got {np.shape(select)}")
+    return zs, np.ascontiguousarray(sel)
+
+
+def tape_girths(
+    vertices: np.ndarray, faces: np.ndarray, zs: np.ndarray, select: np.ndarray
+) -> tuple[np.ndarray, list[np.ndarray]]:
+    """``tape_girth`` at each height of ``zs (L,)`` around ``select``, one point ``(2,)`` for all
+    heights or one per height ``(L, 2)``: girths ``(L,)`` and the tapes' hulls (a list of L ``(H, 2)``).
+    A height where no loop goes around its point gives NaN and an empty ``(0, 2)`` hull instead of
+    raising. Checks and sorts the mesh once; past ``FEW_LEVELS`` heights the sections are compiled
+    (``girth_kernel``): ``tape_girths_reference``'s hulls and girths, bit for bit."""
+    from service.geometry.girth_kernel import NOT_LOOPS, OPEN, tape_hulls
+
+    zs, sel = _checked_levels(zs, select)
+    if len(zs) <= FEW_LEVELS:
+        return tape_girths_reference(vertices, faces, zs, sel)
+    s = _Slicer(vertices, faces)
+    fz = np.ascontiguousarray(s.fz)
+    corners, starts, error = tape_hulls(s.vertices, np.ascontiguousarray(s.faces), fz, s.lowest,
+                                        np.ascontiguousarray(s.highest), s.span, zs, sel)  # fmt: skip
+    if error.any():
+        z = zs[np.flatnonzero(error)[0]]
+        if error[error > 0][0] == OPEN:
+            raise ValueError(f"the section at z={z:g} is open: the mesh is not closed there")
+        assert error[error > 0][0] == NOT_LOOPS
+        raise ValueError(f"the section at z={z:g} is not a set of loops: the faces' orientations disagree")
+    hulls = [corners[a:b] for a, b in zip(starts[:-1], starts[1:], strict=True)]
+    girths = np.array([polyline_length(h) if len(h) else np.nan for h in hulls])
+    return girths, hulls
+
+
+def tape_girths_reference(
+    vertices: np.ndarray, faces: np.ndarray, zs: np.ndarray, select: np.ndarray
+) -> tuple[np.ndarray, list[np.ndarray]]:
+    """``tape_girths`` height by height in numpy (``_Slicer.loops``, ``_outermost_around``)."""
+    slicer = _Slicer(vertices, faces, sort=np.size(zs) > FEW_LEVELS)
+    zs, sel = _checked_levels(zs, select)
     girths, hulls = np.full(len(zs), np.nan), []
     for i, (z, point) in enumerate(zip(zs, sel, strict=True)):
         loop = _outermost_around(slicer.loops(z), point)

@@ -20,6 +20,7 @@ from service.geometry.girth import (
     tape_edges,
     tape_girth,
     tape_girths,
+    tape_girths_reference,
     tape_loop,
 )
 
@@ -213,3 +214,50 @@ def test_tape_edges_are_the_tape_with_its_mesh_edges():
         assert tape.girth == pytest.approx(tape_girth(v, f, z, (0.0, 0.0)), rel=1e-12)
     with pytest.raises(ValueError, match="goes around"):
         tape_edges(v, f, np.array([0.1]), (0.2, 0.0))
+
+
+def _wavy_torso_and_arms():
+    """A wavy torso with two arms beside it and a tube, rings of 97 points (odd, and ties in x where
+    the rings repeat): several loops at most heights."""
+    rng = np.random.default_rng(5)
+    zs = np.linspace(0.0, 1.0, 21)
+    t = 2 * np.pi * np.arange(97) / 97
+    radius = 0.15 + 0.02 * np.sin(5 * t)[None] + 0.01 * rng.random((21, 1))
+    rings = np.stack([np.stack([r * np.cos(t), 0.7 * r * np.sin(t)], 1) for r in radius])
+    torso = stack(rings, zs)
+    parts = [torso, elliptic_cylinder(0.04, 0.03, 97, centre=(0.3, 0.0)),
+             elliptic_cylinder(0.04, 0.03, 97, centre=(-0.3, 0.01))]  # fmt: skip
+    tube = trimesh.creation.annulus(r_min=0.05, r_max=0.08, height=0.4, sections=64)
+    parts.append((np.asarray(tube.vertices) + [0.0, 0.5, 0.3], np.asarray(tube.faces)))
+    offsets = np.cumsum([0] + [len(v) for v, _ in parts])
+    return (np.concatenate([v for v, _ in parts]),
+            np.concatenate([f + o for (_, f), o in zip(parts, offsets, strict=False)]))  # fmt: skip
+
+
+def test_the_compiled_sections_are_the_numpy_path_bit_for_bit():
+    """Many heights (compiled past FEW_LEVELS) through loops of several parts, one point for all and
+    one per height (some in a tube's bore, some around nothing, some above the mesh): the same hulls
+    and girths as height by height in numpy."""
+    v, f = _wavy_torso_and_arms()
+    zs = np.concatenate([np.linspace(-0.1, 1.1, 97), [0.5, 0.35]])  # 0.5 and 0.35: through ring vertices
+    rng = np.random.default_rng(6)
+    points = rng.choice([0.0, 0.3, -0.3, 0.5, 0.2], size=len(zs))[:, None] * [1.0, 0.0] + [0.0, 0.0]
+    points[::7] = [0.0, 0.5]  # in the tube's bore
+    for select in ((0.0, 0.0), points):
+        girths, hulls = tape_girths(v, f, zs, select)
+        ref_girths, ref_hulls = tape_girths_reference(v, f, zs, select)
+        np.testing.assert_array_equal(girths, ref_girths)
+        assert all(np.array_equal(a, b) for a, b in zip(hulls, ref_hulls, strict=True))
+        assert np.isfinite(girths).sum() > 20 and np.isnan(girths).sum() > 5
+
+
+def test_the_compiled_sections_raise_as_the_numpy_path():
+    v, f = elliptic_cylinder(0.2, 0.1, 32)
+    zs = np.linspace(-0.4, 0.4, 40)
+    kept = np.ones(len(f), bool)
+    kept[5] = False
+    flipped = np.concatenate([f[:5], f[5:6, ::-1], f[6:]])
+    for faces, match in ((f[kept], "open"), (flipped, "not a set of loops")):
+        for path in (tape_girths, tape_girths_reference):
+            with pytest.raises(ValueError, match=match):
+                path(v, faces, zs, (0.0, 0.0))
