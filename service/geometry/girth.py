@@ -285,9 +285,11 @@ def tape_girths(
     if len(zs) <= FEW_LEVELS:
         return tape_girths_reference(vertices, faces, zs, sel)
     s = _Slicer(vertices, faces)
-    fz = np.ascontiguousarray(s.fz)
-    corners, starts, error = tape_hulls(s.vertices, np.ascontiguousarray(s.faces), fz, s.lowest,
-                                        np.ascontiguousarray(s.highest), s.span, zs, sel)  # fmt: skip
+    # Writable and C-ordered, every one: numba compiles another version for each array type it meets
+    # (a frozen body's read-only vertices would be one), and only one is compiled ahead of use.
+    mesh = (np.require(a, requirements=["C", "W"]) for a in (s.vertices, s.faces, s.fz, s.lowest, s.highest))
+    levels = (np.require(a, requirements=["C", "W"]) for a in (zs, sel))
+    corners, starts, error = tape_hulls(*mesh, s.span, *levels)
     if error.any():
         z = zs[np.flatnonzero(error)[0]]
         if error[error > 0][0] == OPEN:

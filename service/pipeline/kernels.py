@@ -78,6 +78,13 @@ def compile_kernels(models_dir: Path | None = None) -> None:
     mesh.on_boundary(mesh.query(np.array([[0.2, 0.3, 0.1], [2.0, 0.5, 0.0]])))
     vertex_normals(vertices, faces)
     face_normals(vertices, faces)
+    # A body's girths at many heights (``measure``: the report of a body, not an outfit), on an
+    # octahedron: the compiled sections take every mesh as the same array types.
+    from service.geometry.girth import FEW_LEVELS, tape_girths
+
+    octahedron = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], dtype=float)
+    eight = np.array([[0, 2, 4], [2, 1, 4], [1, 3, 4], [3, 0, 4], [2, 0, 5], [1, 2, 5], [3, 1, 5], [0, 3, 5]])
+    tape_girths(octahedron, eight, np.linspace(-0.5, 0.5, FEW_LEVELS + 1), np.zeros(2))
 
 
 def warm_kernels(environ: Mapping[str, str] = os.environ) -> list[str]:
