@@ -1,12 +1,14 @@
 """Which cubic cells of space a mesh's triangles come within a distance of, for a test by cells of
 whether another triangle can (the repair's world-space near test, ``collisions.passes.near_in_world``).
 
-Each triangle's bounding box, grown by ``pad``, marks every cell it touches (``mark``, compiled); a box
-that overlaps a grown triangle box shares a cell with it (cells are ``floor((x - origin) / cell)`` of
-a box's corners, monotone in x), so ``touching`` never misses one, and a box it flags overlaps a
-triangle box grown by ``pad + cell`` (``boxes_touching_reference``). With cells as large as ``pad``,
-a garment triangle's box touches ~8 cells: ~0.1 us a triangle, where a walk over the closest-point
-hierarchy's boxes took ~2 us and the crossing grid's smaller cells ~1 us.
+Each triangle's bounding box marks the cells it touches (``mark``, compiled), and the marks grow by
+``r = ceil(pad / cell)`` cells along each axis (``dilate``). A box within ``pad`` of a triangle's box
+(on every axis) touches a cell within r cells of one the triangle marked (cells are ``floor((x - origin)
+/ cell)`` of a box's corners, monotone in x), so ``touching`` never misses one; a box it flags is within
+``(r + 1) cell`` of a triangle's box (``boxes_touching_reference``). With cells as large as ``pad``, a
+garment triangle's box touches ~8 cells: ~0.1 us a triangle, where a walk over the closest-point
+hierarchy's boxes took ~2 us and the crossing grid's smaller cells ~1 us; marking each triangle's box
+grown by ``pad`` instead of dilating took 2.5 ms for the body's triangles.
 """
 
 from __future__ import annotations
@@ -42,6 +44,24 @@ def mark(lo, hi, origin, cell, dims, full):
             for iy in range(y0, y1 + 1):
                 for iz in range(z0, z1 + 1):
                     full[(ix * ny + iy) * nz + iz] = True
+
+
+@njit(cache=True, nogil=True)
+def dilate(full, dims, r):
+    """``full`` (flat, z fastest) grown by ``r`` cells along each axis in turn (a cube of 2r + 1 cells
+    around every set cell)."""
+    strides = (dims[1] * dims[2], dims[2], 1)
+    for axis in range(3):
+        n, stride = dims[axis], strides[axis]
+        grown = full.copy()
+        for c in range(len(full)):
+            if not full[c]:
+                continue
+            i = (c // stride) % n
+            for k in range(max(i - r, 0), min(i + r, n - 1) + 1):
+                grown[c + (k - i) * stride] = True
+        full = grown
+    return full
 
 
 @njit(cache=True, nogil=True)
@@ -92,20 +112,20 @@ class Occupancy:
         if not 0 < pad < np.inf:
             raise ValueError(f"pad must be positive and finite, got {pad}")
         lo, hi = triangle_boxes(vertices, faces)
-        lo, hi = lo - pad, hi + pad
-        origin = lo.min(axis=0) if len(lo) else np.zeros(3)
-        span = hi.max(axis=0) - origin if len(lo) else np.zeros(3)
+        origin = lo.min(axis=0) - pad if len(lo) else np.zeros(3)
+        span = hi.max(axis=0) + pad - origin if len(lo) else np.zeros(3)
         cell = float(pad)
         while (count := float(np.prod(np.floor(span / cell) + 1))) > MAX_CELLS:
             cell *= 1.01 * (count / MAX_CELLS) ** (1 / 3)
         dims = np.floor(span / cell).astype(np.int64) + 1
         full = np.zeros(int(np.prod(dims)), dtype=bool)
         mark(lo, hi, origin, cell, dims, full)
-        return cls(origin, cell, dims, full)
+        return cls(origin, cell, dims, dilate(full, dims, int(np.ceil(pad / cell))))
 
     def touching(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
         """``(Q,)`` bool: whether box ``lo[q], hi[q]`` (``(Q, 3)``) touches a cell within ``pad`` of the
-        mesh: every box within ``pad`` of a triangle's box is (``boxes_touching_reference``)."""
+        mesh: every box within ``pad`` of a triangle's box does, none farther than ``(r + 1) cell``
+        (module docstring; ``boxes_touching_reference``)."""
         lo, hi = (np.ascontiguousarray(b, dtype=np.float64).reshape(-1, 3) for b in (lo, hi))
         out = np.zeros(len(lo), dtype=bool)
         touched(lo, hi, self.origin, self.cell, self.dims, self.full, out)

@@ -1,5 +1,5 @@
 """The cells within a distance of a mesh (``service.geometry.occupancy``): never missing a box within
-that distance of a triangle's box, and flagging none farther than one more cell."""
+that distance of a triangle's box, and flagging none farther than the cells it grew by and one more."""
 
 import numpy as np
 import pytest
@@ -15,7 +15,7 @@ def _bent_sphere():
 
 
 @pytest.mark.parametrize("pad", [0.004, 0.015, 0.05])
-def test_touching_holds_every_box_within_pad_and_none_past_one_more_cell(pad):
+def test_touching_holds_every_box_within_pad_and_none_past_its_cells(pad):
     v, f = _bent_sphere()
     occupancy = Occupancy.build(v, f, pad)
     assert occupancy.cell >= pad
@@ -25,7 +25,7 @@ def test_touching_holds_every_box_within_pad_and_none_past_one_more_cell(pad):
     lo, hi = centre - half, centre + half
     got = occupancy.touching(lo, hi)
     within = boxes_touching_reference(v, f, lo - pad, hi + pad)
-    slack = pad + occupancy.cell * (1 + 1e-9)
+    slack = (np.ceil(pad / occupancy.cell) + 1) * occupancy.cell * (1 + 1e-9)
     beyond = ~boxes_touching_reference(v, f, lo - slack, hi + slack)
     assert within.any() and (~within).any()
     assert got[within].all()  # never misses one
@@ -48,3 +48,15 @@ def test_a_grid_past_its_cap_grows_its_cells_and_still_holds_every_box(monkeypat
     assert occupancy.full.size <= 500 and occupancy.cell > 0.01
     lo = v[f].min(axis=1) - 0.01
     assert occupancy.touching(lo, lo).all()
+
+
+def test_dilation_is_a_cube_of_cells_around_each_set_one():
+    from service.geometry.occupancy import dilate
+
+    dims = np.array([5, 6, 7])
+    full = np.zeros(dims.prod(), dtype=bool)
+    full[np.ravel_multi_index((1, 2, 6), dims)] = True
+    grown = dilate(full, dims, 2).reshape(dims)
+    expected = np.zeros(dims, dtype=bool)
+    expected[0:4, 0:5, 4:7] = True
+    np.testing.assert_array_equal(grown, expected)
