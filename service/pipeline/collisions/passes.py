@@ -12,7 +12,6 @@ from __future__ import annotations
 import time
 from concurrent.futures import Future
 from dataclasses import dataclass, field, fields, replace
-from functools import cached_property
 
 import numpy as np
 
@@ -200,10 +199,13 @@ class _FinalLayer:
     sides: FoldSides | None = None
     """Its side test where those faces are closest (``service.geometry.fold_side``)."""
 
-    @cached_property
-    def occupancy(self) -> Occupancy:
-        """The cells within ``CollisionSettings.reach`` of it, for ``near_in_world``."""
-        return Occupancy.build(self.mesh.vertices, self.mesh.faces, SETTINGS.reach)
+    occupied: dict[float, Occupancy] = field(default_factory=dict, repr=False)
+
+    def occupancy(self, pad: float) -> Occupancy:
+        """The cells within ``pad`` of it (``near_in_world``), built once for each pad."""
+        if pad not in self.occupied:
+            self.occupied[pad] = Occupancy.build(self.mesh.vertices, self.mesh.faces, pad)
+        return self.occupied[pad]
 
 
 def _repair(stack: Stack, body: ClosestPoint, explicit: list[np.ndarray], fitted: Fitted,
@@ -287,6 +289,8 @@ def _repair(stack: Stack, body: ClosestPoint, explicit: list[np.ndarray], fitted
             layer.kept = KeptQueries(layer.mesh, len(world[later]), layer.reversed_faces, layer.sides)
             asked[(later, k)] = (layer, ask_ahead(layer.kept, world[later], np.flatnonzero(layer.near)))
     return Resolved(out, results)
+
+
 def near_in_world(x: np.ndarray, faces: np.ndarray, inner: _FinalLayer, near: np.ndarray,
                   reach: float) -> np.ndarray:  # fmt: skip
     """``near (V,)`` and the corners of every other triangle of ``faces (F, 3)`` over ``x (V, 3)`` that
@@ -302,7 +306,7 @@ def near_in_world(x: np.ndarray, faces: np.ndarray, inner: _FinalLayer, near: np
     report called the outfit clean (``benchmarks.population --outfits``)."""
     other = np.flatnonzero(~near[faces].any(axis=1))
     lo, hi = triangle_boxes(x, faces[other])
-    other = other[inner.occupancy.touching(lo, hi)]
+    other = other[inner.occupancy(reach).touching(lo, hi)]
     if not len(other):
         return near
     corners, back = np.unique(faces[other], return_inverse=True)
