@@ -249,7 +249,14 @@ def _repair(stack: Stack, body: ClosestPoint, explicit: list[np.ndarray], fitted
         layer = inner[k]
         f_k, h_k = fitted.field_at(stack.fields, k, i)
         near = np.abs(f_k) < settings.reach + layer.moved + own[i]
-        near = near_in_world(world[i], stack.faces[i], layer, near, settings.reach)
+        seen = np.flatnonzero(near_in_world(world[i], stack.faces[i], layer, near, settings.reach) & ~near)
+        if len(seen):
+            # Near in the world only: the fit may have left them the bound and an inactive h, as far from
+            # the layer (``fit.FAR_FIELD``); where the layer covers them is asked again.
+            near = near.copy()
+            near[seen] = True
+            h_k = h_k.copy()
+            h_k[seen] = stack.fields(k, fitted.vertices[i][seen])[1]
         return Inner(layer.mesh, False, near, h_k < 0, reversed_faces=layer.turned, sides=layer.sides)
 
     for i, (x, f) in enumerate(zip(world, stack.faces, strict=True)):
