@@ -82,7 +82,9 @@ def main(argv=None) -> None:
 
     models = OutfitModels.load(threads=args.threads)
     models.warm()  # what the service makes at start (service.pipeline.tryon.ModelEngine.load)
-    make_outfit(models, ["shorts"], betas[0], measure=False)  # warm-up: sessions, caches, allocator
+    # Warm-up, as --compare's workers: sessions, caches, allocator, and a shopper's body built and measured
+    # (the body table, the measuring thread, the compiled sections: ~0.45 s the first time).
+    outfit_seconds(models, ["shorts"], [0.5, 170.0, 70.0])
     _header(f"## Latency, one request at a time, {args.bodies} new body shapes per outfit (ms)")
     for k, ids in enumerate(OUTFITS):
         reports = [outfit_seconds(models, list(ids), new_body(b, k)) for b in bodies]
