@@ -131,7 +131,7 @@ class TriangleGrid:
         check_mesh(vertices, faces)
         if cell is not None and not 0 < cell < np.inf:
             raise ValueError(f"cell must be positive and finite, got {cell}")
-        corners, lo, hi = _corner_boxes(vertices, faces)
+        corners, lo, hi = corner_boxes_of(vertices, faces)
         if cell is None:
             side = (hi - lo).max(axis=1) if len(lo) else np.ones(1)
             cell = float(np.median(side)) if len(side) else 1.0
@@ -159,7 +159,7 @@ class TriangleGrid:
     def crossing(self, vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
         """Pairs ``(K, 2)`` (into ``faces (F, 3)`` over ``vertices (V, 3)``, into the grid's faces)
         that cross: ``intersecting_pairs`` against the grid's mesh, the same set."""
-        corners, lo, hi = _corner_boxes(vertices, faces)
+        corners, lo, hi = corner_boxes_of(vertices, faces)
         if not len(corners) or not len(self.normal):
             return np.zeros((0, 2), dtype=np.int64)
         if len(corners) < CROSSING_SPLIT or CROSSING_THREADS <= 1:
@@ -174,7 +174,7 @@ class TriangleGrid:
         return np.concatenate(parts)
 
 
-def _corner_boxes(vertices, faces) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def corner_boxes_of(vertices, faces) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(corners (F, 3, 3), lo, hi (F, 3)) of ``faces (F, 3)`` over ``vertices (V, 3)``: ``vertices[faces]``
     and its min and max over the corners (compiled, ``grid_kernel.corner_boxes``)."""
     vertices = np.ascontiguousarray(vertices, dtype=np.float64)
