@@ -13,7 +13,9 @@ Run (a few seconds, after ``make models`` or with the committed models and a bui
   simulator's own smoothed distance), over all shapes;
 - convergence: share of drapes that met the criterion of training/drape/solve.py within its
   iteration cap, and their mean iterations;
-- the dataset's measured build time (data/drapes/build.json).
+- the dataset's measured build time (data/drapes/build.json);
+- for a dataset of real adults (``training.drape.population``), the held-out error by sex and BMI
+  band: the people the models never saw.
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
+from benchmarks import population
 from service.geometry.closest import ClosestPoint
 from service.pipeline.body import DEFAULT_BETA, BodyModel
 from service.pipeline.canonical import CanonicalSpace
@@ -31,15 +34,17 @@ from service.pipeline.explicit import ExplicitModel
 from training.drape.dataset import DEFAULT_DIR, STATS, load_split
 
 
-def predict_world(
-    model: ExplicitModel, space: CanonicalSpace, body: BodyModel, beta: np.ndarray
-) -> np.ndarray:
-    return space.to_body(model.canonical(beta), body.vertices(beta))
+def bodies_of(body: BodyModel, split: dict) -> list[np.ndarray]:
+    """The body ``(V, 3)`` of each drape of a split: the stored served body, else its beta's."""
+    if "body" in split:
+        return [b.astype(np.float64) for b in split["body"]]
+    return [body.vertices(b) for b in split["beta"]]
 
 
 def vertex_errors(model, space, body, split) -> np.ndarray:
     """Per-vertex distances ``(B, V)`` m between prediction and simulation."""
-    pred = np.stack([predict_world(model, space, body, b) for b in split["beta"]])
+    pred = np.stack([space.to_body(model.canonical(b), v)
+                     for b, v in zip(split["beta"], bodies_of(body, split), strict=True)])  # fmt: skip
     return np.linalg.norm(pred - split["world"], axis=2)
 
 
@@ -47,8 +52,8 @@ def penetration(body: BodyModel, splits: list[dict]) -> tuple[float, float]:
     """(deepest vertex depth m (negative = inside), share of vertices > 1 mm inside)."""
     depths = []
     for split in splits:
-        for beta, world in zip(split["beta"], split["world"], strict=True):
-            closest = ClosestPoint.build(body.vertices(beta), body.faces)
+        for vertices, world in zip(bodies_of(body, split), split["world"], strict=True):
+            closest = ClosestPoint.build(vertices, body.faces)
             depths.append(closest.query(world.astype(np.float64)).signed)
     d = np.concatenate(depths)
     return float(d.min()), float(np.mean(d < -1e-3))
@@ -80,12 +85,14 @@ def main(argv=None) -> None:
     print(header)
     print("-" * len(header))
     it, conv = STATS.index("iterations"), STATS.index("converged")
+    by_band = {}
     for gid in shapes["config"]["garments"]:
         train, test = load_split(args.data, "train", gid), load_split(args.data, "test", gid)
         model = ExplicitModel.load(gid)
         test_err = vertex_errors(model, space, body, test)
         train_err = vertex_errors(model, space, body, train)
         deepest, share = penetration(body, [train, test])
+        by_band[gid] = test_err.mean(axis=1)
         stats = np.concatenate([train["stats"], test["stats"]])
         print(
             f"{gid:<12} {train['world'].shape[1]:>6} {model.basis.shape[0]:>4} "
@@ -94,6 +101,26 @@ def main(argv=None) -> None:
             f"{deepest * 1e3:>5.2f} mm {share * 100:>7.3f}% {stats[:, conv].mean() * 100:>9.0f}% "
             f"{stats[:, it].mean():>6.0f}"
         )
+    if shapes.get("people", {}).get("test"):
+        band_table(shapes["people"]["test"], by_band)
+
+
+def band_table(people: list, errors: dict[str, np.ndarray]) -> None:
+    """Held-out mean vertex error (mm) per sex and BMI band of the test people ``[[sex, row], ...]``,
+    each garment's ``errors (B,)`` (m) in their order."""
+    pops = population.load_all()
+    bmi = np.array([pops[sex].bmi[row] for sex, row in people])
+    bands = population.band_index(bmi, population.BMI_EDGES)
+    labels = population.band_labels(population.BMI_EDGES)
+    print("\n## Held-out error by sex and BMI band (mean mm over vertices; people no model saw)")
+    print("| sex | BMI band | people | BMI | " + " | ".join(errors) + " |")
+    print("|---" * (4 + len(errors)) + "|")
+    sexes = np.array([sex for sex, _ in people])
+    for b, sex in sorted({(int(b), sex) for sex, b in zip(sexes, bands, strict=True)}):
+        pick = (sexes == sex) & (bands == b)
+        cells = " | ".join(f"{e[pick].mean() * 1e3:.1f}" for e in errors.values())
+        bmis = ", ".join(f"{x:.0f}" for x in bmi[pick])
+        print(f"| {sex} | {labels[b]} | {int(pick.sum())} | {bmis} | {cells} |")
 
 
 if __name__ == "__main__":

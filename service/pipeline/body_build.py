@@ -32,6 +32,7 @@ import numpy as np
 
 from service.geometry.self_contact import Pressed, press_contacts, self_crossings
 from service.pipeline.body import (
+    SHAPE_BOUNDS,
     BodyModel,
     ShapeOutOfRange,
     body_measurements,
@@ -41,8 +42,15 @@ from service.pipeline.body import (
     supported_height_range_cm,
     supported_weight_range_kg,
 )
-from service.pipeline.body_fit import GIVEN_SCALE, TOLERANCE, BodyFit, Target, fit_shape
-from service.pipeline.body_table import LEVEL_COLUMNS, BodyTable, girths_at, with_height_and_weight
+from service.pipeline.body_fit import GIVEN_SCALE, TOLERANCE, BodyFit, Target, evaluate, fit_shape
+from service.pipeline.body_table import (
+    HW_ROWS,
+    LEVEL_COLUMNS,
+    NEWTON_STEPS,
+    BodyTable,
+    girths_at,
+    with_height_and_weight,
+)
 from service.pipeline.girth_priors import GirthPriors
 from service.pipeline.measurements import BodyMeasurements, Landmarks, landmarks, measure
 
@@ -213,6 +221,32 @@ def start_shape(model: BodyModel, request: BodyRequest) -> np.ndarray:
         0.5 + (bmi - bmi0) / per,
     )
     return shape
+
+
+def garment_code(model: BodyModel, marks: Landmarks, request: BodyRequest) -> np.ndarray:
+    """beta ``(3,)``: the default-phenotype body of the shopper's gender, height and weight, the weight
+    phenotype extrapolated past the box (up to ``SHAPE_BOUNDS``) where her BMI is beyond it. Inside the
+    box this is ``shape_from_measurements`` itself; beyond it the box's heaviest (or lightest) body of
+    her height is the start of the same Newton solve on the extended shape (``with_height_and_weight``),
+    the height kept within the box's. The code the population drapes (``training.drape``) and the
+    garment models are trained on."""
+    lo, hi = supported_height_range_cm(model, request.gender)
+    h = float(np.clip(request.height_cm, lo, hi))
+    try:
+        return shape_from_measurements(model, request.gender, h, request.weight_kg)
+    except ShapeOutOfRange:
+        pass
+    shape = np.concatenate([garment_beta(model, request), np.zeros(model.n_local)])
+    solved = with_height_and_weight(model, marks, shape, h, request.weight_kg)
+    if solved is not None:
+        return solved[:3].copy()
+    # Heavier (or lighter) than the extended weight phenotype reaches: its bound, at her height.
+    heavier = request.weight_kg > body_measurements(model.shape_vertices(shape), model.faces)[1]
+    shape[2] = SHAPE_BOUNDS[2][1 if heavier else 0]
+    for _ in range(NEWTON_STEPS):
+        values, jac = evaluate(model, marks, shape, HW_ROWS[:1])
+        shape[1] = np.clip(shape[1] - (values[0] - h) / jac[0, 1], *SHAPE_BOUNDS[1])
+    return shape[:3].copy()
 
 
 def garment_beta(model: BodyModel, request: BodyRequest) -> np.ndarray:

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from service.pipeline.explicit import SOFT, ExplicitModel, decode_height, encode_height
+from training.drape import population
 from training.drape.dataset import (
     DatasetConfig,
     box_corners,
@@ -72,8 +73,13 @@ def test_tiny_drape_dataset_builds_resumes_and_trains(tmp_path):
     assert record["bodies"] == 3
     shapes = json.loads((tmp_path / "shapes.json").read_text())
     assert shapes["betas"]["train"] != shapes["betas"]["test"]
+    assert len(shapes["people"]["train"]) == 2 and len(shapes["people"]["test"]) == 1
     train = load_split(tmp_path, "train", "shorts")
     assert train["world"].shape[:2] == (2, 3442) and np.all(np.isfinite(train["canonical"]))
+    # Each drape holds the body the service serves to its adult, not the box body of its code.
+    person = population.people(1, "train")[0]
+    np.testing.assert_allclose(train["body"][0], person[2].astype(np.float32))
+    np.testing.assert_array_equal(train["beta"][0], person[1])
     # No simulated vertex more than 1 mm inside its body.
     assert train["stats"][:, 3].min() > -1e-3
     # Resuming finds nothing left to do.
@@ -159,10 +165,11 @@ def test_body_offset_model_survives_save_load_and_onnx_export(tmp_path):
 
 
 def test_corners_are_training_shapes_inside_the_box_and_held_out_at_its_extremes():
-    splits = split_betas(DatasetConfig())
+    config = DatasetConfig(n_train=14, source="box")
+    splits = split_betas(config)
     train, test = splits["train"], splits["test"]
-    assert len(train) == DatasetConfig.n_train + 8 and len(test) == DatasetConfig.n_test + 4
-    np.testing.assert_array_equal(train[: DatasetConfig.n_train], sample_betas(DatasetConfig.n_train, 1))
+    assert len(train) == config.n_train + 8 and len(test) == config.n_test + 4
+    np.testing.assert_array_equal(train[: config.n_train], sample_betas(config.n_train, 1))
     np.testing.assert_array_equal(test[-4:], box_corners(extremes_only=True))
     # No training shape is a test shape, and the extremes lie outside every training shape's box.
     assert min(np.abs(t - u).max() for t in train for u in test) > 0.05

@@ -7,13 +7,15 @@ Layout under ``data/drapes/`` (resumable: finished bodies are skipped, files app
     test/000.npz ...       held-out shapes, never seen by training
     build.json             measured build time
 
-Shapes: a scrambled Sobol sequence over the documented adult range of Anny's (gender, height,
-weight) parameters; the test split uses another seed, so no test shape is a training shape. A Sobol
-sample of a few dozen points leaves the corners of the box thin (the tallest and heaviest, the
-shortest and lightest), where the explicit models then extrapolate and sink into the body, so the
-training split also holds the box's 8 corners drawn ``corner_inset`` of each range inwards, and the
-test split the 4 extreme corners themselves (``box_corners``): the corners a benchmark measures are
-never training shapes.
+Bodies (``DatasetConfig.source``): ``population`` (the default, issue 55) draws real adults of
+NHANES, tails included (``training.drape.population``); each file then holds the served body
+(``body``) beside its garment code (``beta``). ``box``, the dataset before it: a scrambled Sobol
+sequence over the documented adult range of Anny's (gender, height, weight) parameters; the test
+split uses another seed, so no test shape is a training shape. A Sobol sample of a few dozen points
+leaves the corners of the box thin (the tallest and heaviest, the shortest and lightest), where the
+explicit models then extrapolate and sink into the body, so the training split also holds the box's
+8 corners drawn ``corner_inset`` of each range inwards, and the test split the 4 extreme corners
+themselves (``box_corners``): the corners a benchmark measures are never training shapes.
 """
 
 from __future__ import annotations
@@ -45,10 +47,10 @@ DEFAULT_DIR = Path("data/drapes")
 
 @dataclass(frozen=True)
 class DatasetConfig:
-    n_train: int = 14
-    """Training body shapes."""
+    n_train: int = 28
+    """Training bodies (population: two per sex and BMI band; box: Sobol shapes before the corners)."""
     n_test: int = 8
-    """Held-out body shapes."""
+    """Held-out bodies."""
     train_seed: int = 1
     test_seed: int = 2
     garments: tuple[str, ...] = ()
@@ -57,6 +59,12 @@ class DatasetConfig:
     """Add the inset box corners to the training split and the extreme ones to the test split."""
     corner_inset: float = 0.1
     """Share of the height and weight ranges by which the training corners sit inside the box."""
+    source: str = "population"
+    """``population``: real adults (``training.drape.population``); ``box``: Sobol shapes and corners."""
+
+    def __post_init__(self):
+        if self.source not in ("population", "box"):
+            raise ValueError(f"source must be 'population' or 'box', got {self.source!r}")
 
 
 def sample_betas(n: int, seed: int) -> np.ndarray:
@@ -79,8 +87,26 @@ def box_corners(inset: float = 0.0, extremes_only: bool = False) -> np.ndarray:
     return np.array([[g, h, w] for g in (0.0, 1.0) for h, w in pairs])
 
 
+def split_bodies(config: DatasetConfig) -> dict[str, tuple[np.ndarray, np.ndarray | None, list]]:
+    """Per split (betas ``(B, 3)``, served bodies ``(B, V, 3)`` or None where a beta's box body is
+    the body, the people as ``[sex, row]`` or empty)."""
+    if config.source == "box":
+        return {k: (b, None, []) for k, b in split_betas(config).items()}
+    from training.drape.population import people
+
+    out = {}
+    for split, n in (("train", config.n_train), ("test", config.n_test)):
+        picked = people(n, split)
+        out[split] = (
+            np.array([c for _, c, _ in picked]).reshape(-1, 3),
+            np.array([v for _, _, v in picked]) if picked else None,
+            [[p.sex, p.row] for p, _, _ in picked],
+        )
+    return out
+
+
 def split_betas(config: DatasetConfig) -> dict[str, np.ndarray]:
-    """The betas of each split: Sobol points first, then the corners (so growing ``n_train`` or
+    """The box betas of each split: Sobol points first, then the corners (so growing ``n_train`` or
     ``n_test`` is a rebuild, and the corners never shift the Sobol prefix)."""
     train = sample_betas(config.n_train, config.train_seed)
     test = sample_betas(config.n_test, config.test_seed)
@@ -164,7 +190,7 @@ def clear_dataset(out: Path = DEFAULT_DIR) -> int:
     for path in sorted(Path(out).glob("*/[0-9][0-9][0-9].npz")):
         with np.load(path) as z:
             arrays = dict(z)
-        body = model.vertices(arrays["beta"])
+        body = drape_body(model, arrays)
         closest = ClosestPoint.build(body, model.faces)
         changed = False
         for gid in catalog:
@@ -206,13 +232,19 @@ def _init_worker(garment_ids: tuple[str, ...]) -> None:
     )
 
 
-def _drape_body(job: tuple[Path, np.ndarray, DrapeSettings]) -> tuple[Path, float]:
-    path, beta, settings = job
+def drape_body(model: BodyModel, arrays) -> np.ndarray:
+    """The body ``(V, 3)`` of one drape file's arrays: the stored served body, else the box body of
+    its beta."""
+    return arrays["body"].astype(np.float64) if "body" in arrays else model.vertices(arrays["beta"])
+
+
+def _drape_body(job: tuple[Path, np.ndarray, np.ndarray | None, DrapeSettings]) -> tuple[Path, float]:
+    path, beta, served, settings = job
     t0 = time.perf_counter()
     model, space = _WORKER["model"], _WORKER["space"]
-    body = model.vertices(beta)
+    body = model.vertices(beta) if served is None else served
     planes = body_planes(body, model.faces)
-    arrays = {"beta": beta}
+    arrays = {"beta": beta} | ({} if served is None else {"body": served.astype(np.float32)})
     for g in _WORKER["garments"]:
         d = drape_garment(g, body, model.faces, space, settings, planes)
         arrays[f"{g.id}/world"] = d.world.astype(np.float32)
@@ -232,7 +264,7 @@ def _extends(old: dict, new: dict) -> bool:
         all(old[k] == new[k] for k in ("settings",))
         and old["config"]["garments"] == new["config"]["garments"]
     )
-    seeds = all(old["config"][k] == new["config"][k] for k in ("train_seed", "test_seed"))
+    seeds = all(old["config"].get(k) == new["config"].get(k) for k in ("train_seed", "test_seed", "source"))
     prefix = all(new["betas"][s][: len(old["betas"][s])] == old["betas"][s] for s in ("train", "test"))
     return same and seeds and prefix
 
@@ -246,11 +278,12 @@ def build_dataset(out: Path = DEFAULT_DIR, config: DatasetConfig = DatasetConfig
     out = Path(out)
     garment_ids = config.garments or tuple(load_catalog())
     settings = DrapeSettings()
-    splits = split_betas(config)
+    splits = split_bodies(config)
     manifest = {
         "config": asdict(config) | {"garments": list(garment_ids)},
         "settings": asdict(settings),
-        "betas": {k: v.tolist() for k, v in splits.items()},
+        "betas": {k: v[0].tolist() for k, v in splits.items()},
+        "people": {k: v[2] for k, v in splits.items()},
     }
     out.mkdir(parents=True, exist_ok=True)
     shapes_path = out / "shapes.json"
@@ -258,9 +291,11 @@ def build_dataset(out: Path = DEFAULT_DIR, config: DatasetConfig = DatasetConfig
         raise RuntimeError(f"{shapes_path} was built with another configuration; remove {out} to rebuild")
     shapes_path.write_text(json.dumps(manifest, indent=1))
     jobs = []
-    for split, betas in splits.items():
+    # The held-out split first: an interrupted build can already be measured.
+    for split, (betas, bodies, _) in sorted(splits.items(), key=lambda kv: kv[0] != "test"):
         (out / split).mkdir(exist_ok=True)
-        jobs += [(out / split / f"{i:03d}.npz", b, settings) for i, b in enumerate(betas)]
+        jobs += [(out / split / f"{i:03d}.npz", b, None if bodies is None else bodies[i], settings)
+                 for i, b in enumerate(betas)]  # fmt: skip
     todo = [j for j in jobs if not j[0].exists()]
     record_path = out / "build.json"
     record = json.loads(record_path.read_text()) if record_path.exists() else {"seconds": 0.0, "bodies": 0}
@@ -280,7 +315,8 @@ def build_dataset(out: Path = DEFAULT_DIR, config: DatasetConfig = DatasetConfig
 
 
 def load_split(out: Path, split: str, garment_id: str) -> dict[str, np.ndarray]:
-    """Stacked arrays of one garment over a split: beta (B, 3), world/canonical (B, V, 3), stats."""
+    """Stacked arrays of one garment over a split: beta (B, 3), world/canonical (B, V, 3), stats, and
+    body (B, V_body, 3) where every file holds its served body."""
     files = sorted((Path(out) / split).glob("[0-9][0-9][0-9].npz"))
     if not files:
         raise FileNotFoundError(f"no drapes in {Path(out) / split}; run python -m training.drape")
@@ -290,4 +326,4 @@ def load_split(out: Path, split: str, garment_id: str) -> dict[str, np.ndarray]:
         "world": np.stack([r[f"{garment_id}/world"] for r in rows]),
         "canonical": np.stack([r[f"{garment_id}/canonical"] for r in rows]),
         "stats": np.stack([r[f"{garment_id}/stats"] for r in rows]),
-    }
+    } | ({"body": np.stack([r["body"] for r in rows])} if all("body" in r for r in rows) else {})

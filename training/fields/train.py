@@ -1,10 +1,11 @@
 """Train the neural field of one garment (or the body) with L1 losses on values and gradients (eq. 1-5).
 
-Training shapes: ``config.n_betas`` Sobol shapes over the supported box; held-out shapes come from
-another seed. Ground truth per shape (``training.fields.samples``) is cached under ``data/fields/``;
-the network is checkpointed under ``build/fields/`` every ``CHECKPOINT_EVERY`` steps and a run with
-the same config resumes from it (batch i is drawn from ``default_rng((seed, i))``, so a resumed run
-ends with the weights an uninterrupted one would).
+Training shapes: the garment codes of ``config.n_betas`` real adults (``population.codes``: the
+drape dataset's cells, tails included, a quarter of them with a gender in between); held-out shapes
+are codes of adults of the held-out set. Ground truth per shape (``training.fields.samples``) is
+cached under ``data/fields/``; the network is checkpointed under ``build/fields/`` every
+``CHECKPOINT_EVERY`` steps and a run with the same config resumes from it (batch i is drawn from
+``default_rng((seed, i))``, so a resumed run ends with the weights an uninterrupted one would).
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ from service.pipeline.catalog import load_catalog
 from service.pipeline.explicit import ExplicitModel
 from service.process.manifest import file_sha256
 from service.process.paths import models_dir
-from training.drape.dataset import sample_betas
+from training.drape import population
 from training.fields.net import FieldConfig, FieldNet
 from training.fields.samples import (
     GROUND_TRUTH_VERSION,
@@ -35,6 +36,7 @@ from training.fields.samples import (
 BODY = "body"
 TRAIN_SEED, TEST_SEED = 11, 12
 N_TEST_BETAS = 16
+BETA_SOURCE = "pop"  # in the ground truth's cache name: the population's codes, not the box's
 DATA_DIR = Path("data/fields")
 CHECKPOINT_DIR = Path("build/fields")
 CHECKPOINT_EVERY = 500
@@ -89,12 +91,13 @@ def training_data(surfaces: Surfaces, config: FieldConfig, log=print) -> dict[st
     size = f"{config.n_betas}x{config.points_per_beta}"
     name = f"{surfaces.field_id}_{size}_s{config.seed}_v{GROUND_TRUTH_VERSION}"
     name += f"_{surfaces.source}" if surfaces.source else ""
+    name += f"_{BETA_SOURCE}"
     path = DATA_DIR / f"{name}.npz"
     if path.exists():
         with np.load(path) as z:
             return dict(z)
     t0 = time.perf_counter()
-    betas = sample_betas(config.n_betas, TRAIN_SEED)
+    betas = population.codes(config.n_betas, "train", TRAIN_SEED)
     parts, beta_rows = [], []
     for i, beta in enumerate(betas):
         s = surfaces(beta)
@@ -215,7 +218,7 @@ def held_out(
 ) -> list[tuple[np.ndarray, FieldSamples]]:
     """Per held-out shape (never trained on): (beta (3,), samples within 1 cm of its surface)."""
     out = []
-    for i, beta in enumerate(sample_betas(N_TEST_BETAS, TEST_SEED)):
+    for i, beta in enumerate(population.codes(N_TEST_BETAS, "test", TEST_SEED)):
         s = surfaces(beta)
         rng = np.random.default_rng((seed, i))
         out.append((beta, near_surface_samples(s.vertices, s.faces, s.loops, n_per_beta, rng)))
