@@ -31,20 +31,14 @@ from service.geometry.closest import ClosestPoint
 from service.pipeline.body import DEFAULT_BETA, BodyModel
 from service.pipeline.canonical import CanonicalSpace
 from service.pipeline.explicit import ExplicitModel
-from training.drape.dataset import DEFAULT_DIR, STATS, load_split
-
-
-def bodies_of(body: BodyModel, split: dict) -> list[np.ndarray]:
-    """The body ``(V, 3)`` of each drape of a split: the stored served body, else its beta's."""
-    if "body" in split:
-        return [b.astype(np.float64) for b in split["body"]]
-    return [body.vertices(b) for b in split["beta"]]
+from training.drape.dataset import DEFAULT_DIR, STATS, load_split, split_body_vertices
 
 
 def vertex_errors(model, space, body, split) -> np.ndarray:
     """Per-vertex distances ``(B, V)`` m between prediction and simulation."""
-    pred = np.stack([space.to_body(model.canonical(b), v)
-                     for b, v in zip(split["beta"], bodies_of(body, split), strict=True)])  # fmt: skip
+    bodies = split_body_vertices(body, split)
+    pairs = zip(split["beta"], bodies, strict=True)
+    pred = np.stack([space.to_body(model.canonical(b), v) for b, v in pairs])
     return np.linalg.norm(pred - split["world"], axis=2)
 
 
@@ -52,7 +46,7 @@ def penetration(body: BodyModel, splits: list[dict]) -> tuple[float, float]:
     """(deepest vertex depth m (negative = inside), share of vertices > 1 mm inside)."""
     depths = []
     for split in splits:
-        for vertices, world in zip(bodies_of(body, split), split["world"], strict=True):
+        for vertices, world in zip(split_body_vertices(body, split), split["world"], strict=True):
             closest = ClosestPoint.build(vertices, body.faces)
             depths.append(closest.query(world.astype(np.float64)).signed)
     d = np.concatenate(depths)

@@ -314,6 +314,14 @@ def build_dataset(out: Path = DEFAULT_DIR, config: DatasetConfig = DatasetConfig
     return record
 
 
+def split_body_vertices(model: BodyModel, split: dict) -> list[np.ndarray]:
+    """The body ``(V, 3)`` float64 of each drape of a ``load_split`` split: its stored served body,
+    else the box body of its beta."""
+    if "body" in split:
+        return [b.astype(np.float64) for b in split["body"]]
+    return [model.vertices(b) for b in split["beta"]]
+
+
 def load_split(out: Path, split: str, garment_id: str) -> dict[str, np.ndarray]:
     """Stacked arrays of one garment over a split: beta (B, 3), world/canonical (B, V, 3), stats, and
     body (B, V_body, 3) where every file holds its served body."""

@@ -13,11 +13,11 @@ from pathlib import Path
 
 import numpy as np
 
-from service.pipeline.body import DEFAULT_BETA, BodyModel, measurements_from_shape
+from service.pipeline.body import DEFAULT_BETA, BodyModel, body_measurements
 from service.pipeline.canonical import CanonicalSpace
 from service.pipeline.explicit import ExplicitModel
 from service.process.paths import REPO_ROOT
-from training.drape.dataset import DEFAULT_DIR, load_split
+from training.drape.dataset import DEFAULT_DIR, load_split, split_body_vertices
 from training.pictures import GARMENT_COLORS
 from training.render import PALETTE, MeshLayer, grid, render_views, save_png
 
@@ -32,22 +32,24 @@ def contrasting(betas: np.ndarray, count: int = 4) -> list[int]:
     return [int(np.argmin(np.linalg.norm(unit - np.array(c), axis=1))) for c in CONTRAST[:count]]
 
 
-def _label(body: BodyModel, beta: np.ndarray) -> str:
-    h, w = measurements_from_shape(body, beta)
-    return f"{'female' if beta[0] > 0.5 else 'male'} g={beta[0]:.2f}, {h:.0f} cm, {w:.0f} kg"
+def _label(body: BodyModel, beta: np.ndarray, vertices: np.ndarray) -> str:
+    h, w = body_measurements(vertices, body.faces)
+    sex = "female" if beta[0] > 0.5 else "male"
+    return f"{sex} g={beta[0]:.2f}, {100 * h:.0f} cm, {w:.0f} kg, BMI {w / h**2:.0f}"
 
 
 def drape_picture(body: BodyModel, data: dict, garment_id: str, faces: np.ndarray) -> np.ndarray:
     images, titles = [], []
     color = GARMENT_COLORS.get(garment_id, PALETTE["rose"])
+    bodies = split_body_vertices(body, data)
     for i in contrasting(data["beta"]):
         beta = data["beta"][i]
         layers = [
-            MeshLayer(body.vertices(beta), body.faces, PALETTE["skin"]),
+            MeshLayer(bodies[i], body.faces, PALETTE["skin"]),
             MeshLayer(data["world"][i], faces, color),
         ]
         images.append(render_views(layers, ("front", "side"), 380))
-        titles.append(_label(body, beta))
+        titles.append(_label(body, beta, bodies[i]))
     return grid(images, titles, columns=2)
 
 
@@ -58,9 +60,10 @@ def comparison_picture(
     for gid in ids:
         test = load_split(data_dir, "test", gid)
         model = ExplicitModel.load(gid)
+        bodies = split_body_vertices(body, test)
         for i in contrasting(test["beta"], 2):
             beta = test["beta"][i]
-            b = body.vertices(beta)
+            b = bodies[i]
             pred = space.to_body(model.canonical(beta), b)
             err = np.linalg.norm(pred - test["world"][i], axis=1).mean() * 1e3
             skin = MeshLayer(b, body.faces, PALETTE["skin"])
@@ -70,7 +73,7 @@ def comparison_picture(
             ):
                 images.append(render_views([skin, MeshLayer(v, faces[gid], color)], ("front", "side"), 300))
                 titles.append(
-                    f"{gid} {name}: {_label(body, beta)}"
+                    f"{gid} {name}: {_label(body, beta, b)}"
                     + (f", mean error {err:.1f} mm" if name[0] == "e" else "")
                 )
     return grid(images, titles, columns=2)
@@ -88,10 +91,9 @@ def main(argv=None) -> None:
     body = BodyModel.load()
     catalog = load_catalog()
     for gid in ids:
-        data = {
-            k: np.concatenate([load_split(args.data, s, gid)[k] for s in ("train", "test")])
-            for k in ("beta", "world")
-        }
+        splits = [load_split(args.data, s, gid) for s in ("train", "test")]
+        keys = [k for k in ("beta", "world", "body") if k in splits[0]]
+        data = {k: np.concatenate([s[k] for s in splits]) for k in keys}
         save_png(args.out / f"drape_{gid}.png", drape_picture(body, data, gid, catalog[gid].faces))
     space = CanonicalSpace.build(body.vertices(np.asarray(DEFAULT_BETA)), body.faces)
     faces = {gid: catalog[gid].faces for gid in ids}

@@ -2,8 +2,9 @@
 
 The training split draws from the fitting set, the test split from the held-out set, so no test body
 and none of the tails ``benchmarks.population --outfits`` dresses is a training body. Each body is the
-one the service serves to that adult asking with their gender, height, weight and hip girth (pressed
-where its parts cross), and its garment code is ``body_build.garment_code``.
+one the service dresses for that adult asking with their gender, height, weight and hip girth (pressed
+where its parts cross, those contacts opened for cloth), and its garment code is
+``body_build.garment_code``.
 
 Cells: sex x the BMI bands of ``benchmarks.population`` (7 bands: the tails are as many cells as the
 middle, not their ~3 % of adults). People are taken round-robin over the cells in ``CELL_ORDER`` (so
@@ -23,6 +24,7 @@ import numpy as np
 from benchmarks import population as nhanes
 from service.pipeline.body import BodyModel, ShapeOutOfRange
 from service.pipeline.body_build import BodyBuilder, BodyRequest, garment_code
+from service.pipeline.dressed_body import dressed_vertices
 from service.pipeline.girth_priors import GirthPriors
 
 # Band indices (``nhanes.BMI_EDGES``: <18.5, 18.5-25, 25-30, 30-35, 35-40, 40-50, >=50), far apart first.
@@ -67,13 +69,15 @@ def _builder() -> BodyBuilder:
 
 
 def served(person: Person) -> tuple[np.ndarray, np.ndarray] | None:
-    """(garment code beta ``(3,)``, served body vertices ``(V, 3)``) of ``person``; None if refused."""
+    """(garment code beta ``(3,)``, body vertices ``(V, 3)``) of ``person``; None if refused. The body
+    is the one the service fits garments to: built, pressed where its parts cross and those contacts
+    opened for cloth (``dressed_body``)."""
     builder = _builder()
     try:
         built = builder.build(person.request)
     except ShapeOutOfRange:
         return None
-    return garment_code(builder.model, builder.marks, person.request), built.vertices
+    return garment_code(builder.model, builder.marks, person.request), dressed_vertices(builder.model, built)
 
 
 def people(n: int, split: str) -> list[tuple[Person, np.ndarray, np.ndarray]]:
