@@ -20,10 +20,10 @@ test: $(VENV)/.installed-test $(JS_DIR)/node_modules/.installed chromium nginx
 	$(BIN)/ruff check .
 	$(BIN)/pytest
 
-# Rebuild every committed model from scratch (body basis, garment catalog, drape dataset,
-# explicit garment models, untangling operator, neural fields), then the manifest. Each network is
-# trained by training.X into a checkpoint and written to ONNX by export.X (export reads training,
-# never the other way). Every long step resumes where it stopped (data/drapes, build/*.ckpt,
+# Rebuild every committed model from scratch (body basis, garment catalog, drape datasets of real adults
+# and of the box, explicit garment models, untangling operator, neural fields), then the manifest. Each
+# network is trained by training.X into a checkpoint and written to ONNX by export.X (export reads
+# training, never the other way). Every long step resumes where it stopped (data/drapes*, build/*.ckpt,
 # build/fields); delete them to redo.
 models: $(VENV)/.installed-test
 	$(BIN)/python -m export.body
@@ -32,7 +32,8 @@ models: $(VENV)/.installed-test
 	$(BIN)/python -m export.body_sdf
 	$(BIN)/python -m training.garments
 	$(BIN)/python -m training.drape
-	$(BIN)/python -m training.explicit
+	$(BIN)/python -m training.drape --source box --train 14 --test 8 --out data/drapes_box
+	$(BIN)/python -m training.explicit --box-data data/drapes_box
 	$(BIN)/python -m export.explicit
 	$(BIN)/python -m training.untangler
 	$(BIN)/python -m export.untangler

@@ -16,9 +16,10 @@ the mesh served is pressed into contact (``pressed_body``, ``service.geometry.se
 closed surface that does not cross itself, for the fields, the garments and the tape. The weight is
 solved again on the pressed mesh, and every measurement reported is read on it.
 
-The garment models were trained on the bodies of Anny's unextended (gender, height, weight) box
-(``body.shape_from_measurements``); a garment takes the code of the box body nearest in height and
-weight (``garment_beta``) and follows the shopper's own body through the canonical displacement
+The garment models were trained on drapes of real adults, tails included (``training.drape``); a
+garment takes the code of the default-phenotype body of the shopper's gender, height and weight, its
+weight phenotype extrapolated past Anny's box where she is heavier or lighter than it reaches
+(``garment_code``), and follows the shopper's own body through the canonical displacement
 (``canonical.py``), as on any body.
 """
 
@@ -100,8 +101,9 @@ class BodyRequest:
 @dataclass(frozen=True)
 class BuiltBody:
     """A shopper's body: its extended ``shape (S,)``, its mesh ``vertices (V, 3)`` (the shape's, pressed
-    where its parts cross: ``pressed_body``), the ``garment_beta (3,)`` garments take, what the mesh
-    measures, and the value each predicted girth was fitted to (name -> cm)."""
+    where its parts cross: ``pressed_body``), the ``garment_beta (3,)`` garments take
+    (``garment_code``), what the mesh measures, and the value each predicted girth was fitted to
+    (name -> cm)."""
 
     shape: np.ndarray
     vertices: np.ndarray = field(repr=False)
@@ -250,7 +252,8 @@ def garment_code(model: BodyModel, marks: Landmarks, request: BodyRequest) -> np
 
 
 def garment_beta(model: BodyModel, request: BodyRequest) -> np.ndarray:
-    """beta ``(3,)`` of the box body (``body.shape_from_measurements``) nearest in height, then weight."""
+    """beta ``(3,)`` of the box body (``body.shape_from_measurements``) nearest in height, then weight:
+    the garment code of the models before issue 55's population drapes, and ``garment_code``'s start."""
     lo, hi = supported_height_range_cm(model, request.gender)
     h = float(np.clip(request.height_cm, lo, hi))
     w_lo, w_hi = supported_weight_range_kg(model, request.gender, h)
@@ -323,8 +326,8 @@ def build_body(
             allowed = HEIGHT_RANGE_CM
         message = f"no body has {', '.join(misses)} together as given ({asked}); closest built: {closest}"
         raise ShapeOutOfRange(field, message, allowed)
-    return BuiltBody(shape, vertices, garment_beta(model, request), measured, predicted, tuple(request.given),
-                     fit, pressed)  # fmt: skip
+    code = garment_code(model, marks, request)
+    return BuiltBody(shape, vertices, code, measured, predicted, tuple(request.given), fit, pressed)
 
 
 def pressed_body(
@@ -375,7 +378,8 @@ def _from_table(model, marks, table: BodyTable, request: BodyRequest, predicted:
     # The mesh is measured beside the outfit the request asks for (report only: the garments do not
     # need it): 3-25 ms off the request's path, a body without an outfit waits for it.
     measuring = _MEASURE_POOL.submit(_table_measurement, model, marks, vertices, levels_m if read else None)
-    return BuiltBody(shape, vertices, garment_beta(model, request), measuring, predicted, (), None, pressed)
+    code = garment_code(model, marks, request)
+    return BuiltBody(shape, vertices, code, measuring, predicted, (), None, pressed)
 
 
 def _table_measurement(model, marks, vertices: np.ndarray, levels_m: np.ndarray | None) -> BodyMeasurements:

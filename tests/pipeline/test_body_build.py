@@ -16,6 +16,7 @@ from service.pipeline.body_build import (
     HEIGHT_RANGE_CM,
     BodyBuilder,
     BodyRequest,
+    garment_code,
     weight_range_kg,
 )
 from service.pipeline.body_fit import TOLERANCE
@@ -52,8 +53,12 @@ def test_given_measurements_are_reproduced_and_missing_ones_reported(builder, re
     assert "waist_iliac_cm" not in built.predicted or "waist_cm" not in request_.given
     lo, hi = np.array(SHAPE_BOUNDS).T
     assert np.all((built.shape >= lo) & (built.shape <= hi))
-    # The garments' code is a body of the trained box, as near in height and weight as it has.
+    # The garments' code is the default-phenotype body of her gender, height and weight (the heavy
+    # woman's weight phenotype past the box's 1), what the population drapes were trained on.
     assert SUPPORTED_HEIGHT_PARAM[0] <= built.garment_beta[1] <= SUPPORTED_HEIGHT_PARAM[1]
+    np.testing.assert_array_equal(built.garment_beta, garment_code(builder.model, builder.marks, request_))
+    if request_.weight_kg / (request_.height_cm / 100.0) ** 2 > 40.0:
+        assert built.garment_beta[2] > 1.0
     assert builder.build(request_) is built  # kept
 
 
