@@ -290,6 +290,8 @@ def build_body(
     except ValueError as e:  # the start's landmarks not found: no body to offer
         lo, hi = weight_range_kg(request.height_cm)
         raise ShapeOutOfRange("weight_kg", f"no body could be built for {request}: {e}", (lo, hi)) from None
+    if not first.reproduced and table is not None:
+        first = min(first, _fit_from_table(model, marks, table, request, hard, given), key=lambda f: f.worst)
     fit = first
     if first.reproduced and len(targets) > len(hard):
         budget = BODY_EVALUATIONS - first.evaluations
@@ -328,6 +330,25 @@ def build_body(
         raise ShapeOutOfRange(field, message, allowed)
     code = garment_code(model, marks, request)
     return BuiltBody(shape, vertices, code, measured, predicted, tuple(request.given), fit, pressed)
+
+
+def _fit_from_table(
+    model, marks, table: BodyTable, request: BodyRequest, hard: dict, given: tuple
+) -> BodyFit:
+    """The given measurements' fit started from the table's body of the request's height and weight
+    (no girth), where the rule-of-thumb start failed: from that start the fit of a 190 cm, 120 kg man
+    with chest 123.5 and hip 127.5 cm stalled at its first step (every step raised the cost) and was
+    refused, 12 kg short; from the table's body it reproduces them. Costs a refusal one more fit."""
+    looked = table.lookup(request.gender, request.height_cm, request.weight_kg)
+    shape = None if looked is None else with_height_and_weight(
+        model, marks, looked[0], request.height_cm, request.weight_kg
+    )
+    try:
+        if shape is not None:
+            return fit_shape(model, marks, shape, hard, frozenset(given), BODY_EVALUATIONS)
+    except ValueError:  # the start's landmarks not found
+        pass
+    return BodyFit(np.zeros(0), None, np.inf, 0)
 
 
 def pressed_body(

@@ -20,8 +20,10 @@ from service.pipeline.body_build import (
     weight_range_kg,
 )
 from service.pipeline.body_fit import TOLERANCE
+from service.pipeline.body_table import TABLE_NAME, BodyTable
 from service.pipeline.girth_priors import MODELS, GirthPriors
 from service.pipeline.measurements import measure
+from service.process.paths import models_dir
 
 # Real-looking requests: a heavy short woman with her hip, a tall thin man, a woman giving all three
 # girths, a heavy man giving his waist.
@@ -60,6 +62,19 @@ def test_given_measurements_are_reproduced_and_missing_ones_reported(builder, re
     if request_.weight_kg / (request_.height_cm / 100.0) ** 2 > 40.0:
         assert built.garment_beta[2] > 1.0
     assert builder.build(request_) is built  # kept
+
+
+def test_a_fit_stalled_at_its_rule_of_thumb_start_is_tried_again_from_the_table():
+    """A tall heavy man giving chest and hip: from ``start_shape`` the fit stalls at its first step
+    and is refused 12 kg short (without the table); from the table's body of his height and weight it
+    reproduces them."""
+    model, priors = BodyModel.load(), GirthPriors.load()
+    request = BodyRequest(0.0, 189.8, 120.0, chest_cm=123.5, hip_cm=127.5)
+    with pytest.raises(ShapeOutOfRange):
+        BodyBuilder(model, priors).build(request)
+    built = BodyBuilder(model, priors, BodyTable.load(models_dir() / "body" / TABLE_NAME)).build(request)
+    for name in ("height_cm", "weight_kg", "chest_cm", "hip_cm"):
+        assert _within(getattr(built.measured, name), getattr(request, name), name), name
 
 
 # The heaviest held-out NHANES adults (benchmarks.population's BMI tail, 2017-2020): their inner thighs,
