@@ -69,12 +69,14 @@ class MeshLayer:
     vertices: (V, 3) float, metres, Anny frame (Z up, body faces -Y); stored as float64.
     faces: (F, 3) int, indices into ``vertices``; stored as int64. Outward faces wind counter-clockwise.
     color: RGB in [0, 1].
+    face_colors: (F, 3) RGB in [0, 1] per face, in place of ``color`` (a tension map); None: ``color``.
     """
 
     vertices: np.ndarray
     faces: np.ndarray
     color: tuple[float, float, float]
     name: str = ""
+    face_colors: np.ndarray | None = None
 
     def __post_init__(self):
         v = np.asarray(self.vertices)
@@ -94,6 +96,11 @@ class MeshLayer:
         if c.shape != (3,) or not np.all((c >= 0) & (c <= 1)):
             raise ValueError(f"color must be 3 floats in [0, 1], got {self.color!r}")
         self.vertices, self.faces, self.color = v, f.astype(np.int64), tuple(float(x) for x in c)
+        if self.face_colors is not None:
+            fc = np.asarray(self.face_colors, dtype=np.float64)
+            if fc.shape != (len(f), 3) or not np.all((fc >= 0) & (fc <= 1)):
+                raise ValueError(f"face_colors must be ({len(f)}, 3) floats in [0, 1], got shape {fc.shape}")
+            self.face_colors = fc
 
 
 @dataclass
@@ -416,8 +423,11 @@ def render(
     half = (key + to_eye) / np.linalg.norm(key + to_eye)
     lambert = 0.3 + 0.55 * np.clip(nrm @ key, 0, None) + 0.3 * np.clip(nrm @ to_eye, 0, None)
     specular = 0.12 * np.clip(nrm @ half, 0, None) ** 40
-    colors = np.array([layer.color for layer in layers])
-    base = colors[face_layer[f]] * np.where(back, BACK_TINT, 1.0)[:, None]
+    face_colors = np.concatenate([
+        layer.face_colors if layer.face_colors is not None else np.tile(layer.color, (len(layer.faces), 1))
+        for layer in layers
+    ])  # fmt: skip
+    base = face_colors[f] * np.where(back, BACK_TINT, 1.0)[:, None]
     img[hit] = np.clip(base * lambert[:, None] + np.where(back, 0, specular)[:, None], 0, 1)
 
     if outline:

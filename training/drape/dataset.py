@@ -135,8 +135,13 @@ def drape_garment(
     space: CanonicalSpace,
     settings: DrapeSettings,
     planes=None,
+    rest_body: np.ndarray | None = None,
 ) -> GarmentDrape:
-    """Drape one garment (template on the mean body) on a body ``(V, 3)`` and canonicalise it."""
+    """Drape one garment (template on the mean body) on a body ``(V, 3)`` and canonicalise it.
+
+    ``rest_body (V, 3)``: the body of a size's chart row (issue 56, ``training.garments.grading``);
+    the rest shape is then the template carried onto it, cloth of that size, whatever body wears it.
+    None: the one-size garment, graded ``settings.grading`` of the way to the wearer."""
     t0 = time.perf_counter()
     planes = planes or body_planes(body, faces)
     carried = space.to_body(garment.vertices, body)
@@ -147,7 +152,10 @@ def drape_garment(
     # Shops sell sizes: the rest shape is graded part of the way to the body (settings.grading),
     # the rest of the body's change shows as a taut garment on a big body and a loose one on a
     # small body.
-    graded = garment.vertices + settings.grading * (carried - garment.vertices)
+    if rest_body is None:
+        graded = garment.vertices + settings.grading * (carried - garment.vertices)
+    else:
+        graded = space.to_body(garment.vertices, rest_body)
     problem = DrapeProblem(
         energy.rest_shape(graded, garment.faces),
         energy.bending_matrix(graded, garment.faces),
