@@ -7,11 +7,14 @@ measurements, as a shop's size table lists them. The style's *design ease* in a 
 its M on the M chart body (the garment the pattern was drawn as; a tank top fits at +4 cm, a jacket
 hangs at +28, docs/fit.md).
 
-On a shopper, a size's ease in a region is its girth minus the tape over her body and the layers
-under it there. The rule (``recommend``, ``RULE``):
+On a shopper, a size's ease in a region is its girth minus the tape over her body, and over her body
+and the layers under it there. The rule (``recommend``, ``RULE``):
 
-1. A size *fits* where every region's ease is at least its design ease minus ``EASE_TOLERANCE_CM``,
-   half a chart step: a body at the top of a size's chart band still takes that size.
+1. A size *fits* where every region's ease over the body is at least its design ease minus
+   ``EASE_TOLERANCE_CM``, half a chart step (a body at the top of a size's chart band still takes that
+   size: the chart's choice, as a size table picks it), and, with layers under it, its ease over them
+   is at least ``OVER_LAYERS_CM`` (it goes on over them: a jacket's 26 cm of design ease are meant
+   for a shirt under it, so over a T-shirt the chart's size still fits, over a thick stack it may not).
 2. The recommended size is the smallest that fits; none fitting, the largest, marked as not fitting,
    with the regions that do not.
 3. The runner-up is the next size up when the recommended one fits by less than ``CLOSE_CM`` somewhere
@@ -34,11 +37,14 @@ from service.pipeline.sizes import LETTERS
 from service.process.paths import models_dir
 
 SIZES_NAME = "sizes.json"
-RULE = "smallest-size-with-design-ease/v1"
+RULE = "smallest-size-with-design-ease/v2"
 # Half the EN 13402-3 band of the primary girth (8 cm for most letters): a body anywhere in a size's
 # band fits it.
 EASE_TOLERANCE_CM = 4.0
 CLOSE_CM = 2.0  # a fit or a miss this narrow names the neighbouring size as the runner-up
+# The least room a garment leaves over the layers under it: the least wearing ease of a woven bodice at
+# the bust, 1.5 in (3.8 cm; Robinson, Costume Text ch. 16, Central Washington University).
+OVER_LAYERS_CM = 3.8
 DESIGN_SIZE = "M"
 
 
@@ -89,20 +95,32 @@ class Recommendation:
     runner_up_is: str | None
 
 
-def margins(ease: dict[str, float], design: dict[str, float]) -> dict[str, float]:
-    """Per region: ease minus its minimum (design ease - ``EASE_TOLERANCE_CM``); >= 0 fits."""
-    return {r: e - (design[r] - EASE_TOLERANCE_CM) for r, e in ease.items() if r in design}
+def margins(
+    ease: dict[str, float], design: dict[str, float], over_layers: dict[str, float] | None = None
+) -> dict[str, float]:
+    """Per region: how far the ease is above its minimum (>= 0 fits): over the body ``ease``, design
+    ease - ``EASE_TOLERANCE_CM``; over the layers ``over_layers`` (None: no layers), ``OVER_LAYERS_CM``;
+    the lesser of the two."""
+    out = {r: e - (design[r] - EASE_TOLERANCE_CM) for r, e in ease.items() if r in design}
+    if over_layers is not None:
+        out = {r: min(m, over_layers[r] - OVER_LAYERS_CM) if r in over_layers else m for r, m in out.items()}
+    return out
 
 
-def recommend(eases: dict[str, dict[str, float]], design: dict[str, float]) -> Recommendation:
-    """The size (module docstring) among ``eases`` (letter -> region -> ease cm, smallest size first)
-    for a style of design ease ``design`` (region -> cm)."""
+def recommend(
+    eases: dict[str, dict[str, float]], design: dict[str, float],
+    over_layers: dict[str, dict[str, float]] | None = None,
+) -> Recommendation:  # fmt: skip
+    """The size (module docstring) among ``eases`` (letter -> region -> ease over the body, cm,
+    smallest size first) for a style of design ease ``design`` (region -> cm); ``over_layers``: the
+    ease over the body and the layers under it, likewise (None: nothing under)."""
     letters = list(eases)
-    worst = {s: min(margins(eases[s], design).values(), default=0.0) for s in letters}
+    margin = {s: margins(eases[s], design, None if over_layers is None else over_layers[s]) for s in letters}
+    worst = {s: min(margin[s].values(), default=0.0) for s in letters}
     fitting = [s for s in letters if worst[s] >= 0.0]
     size = fitting[0] if fitting else letters[-1]
     k = letters.index(size)
-    short = tuple(r for r, m in margins(eases[size], design).items() if m < 0.0)
+    short = tuple(r for r, m in margin[size].items() if m < 0.0)
     runner, why = None, None
     if fitting and worst[size] < CLOSE_CM and k + 1 < len(letters):
         runner, why = letters[k + 1], "roomier"

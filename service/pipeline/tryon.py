@@ -122,6 +122,10 @@ class Engine(Protocol):
     def make_body(self, spec: OutfitSpec) -> OutfitResult:
         """The body of ``spec`` alone (its garments are ignored): GLB and ``report["body"]``."""
 
+    def fit(self, spec: OutfitSpec, style: str) -> dict:
+        """``style``'s fit, size by size, on the body of ``spec`` over ``spec.garments`` worn under it
+        (``service.pipeline.size_fit``): the answer of ``POST /v1/fit``, ``report["body"]`` included."""
+
     def body_ranges(self, gender: float, height_cm: float | None, weight_kg: float | None = None) -> dict:
         """``{"height_cm": (lo, hi), "weight_kg": (lo, hi), "at_height_cm": h, "at_weight_kg": w,
         "chest_cm": ..., "waist_cm": ..., "hip_cm": ...}``: what ``validate`` accepts for this gender,
@@ -130,17 +134,22 @@ class Engine(Protocol):
         (``service.pipeline.body.printed_bounds``)."""
 
 
-def check_garment_ids(garments: tuple[str, ...], allowed: list[str], max_garments: int) -> None:
-    """Raise ``InvalidField("garments", ...)`` unless 1..max_garments distinct ids from ``allowed``."""
+def check_garment_ids(
+    garments: tuple[str, ...], allowed: list[str], max_garments: int, field: str = "garments"
+) -> None:
+    """Raise ``InvalidField(field, ...)`` unless 1..max_garments distinct ids from ``allowed``."""
     listing = f"1-{max_garments} distinct ids, inner to outer, from: {', '.join(allowed)}"
     if not 1 <= len(garments) <= max_garments:
-        raise InvalidField("garments", f"{len(garments)} given", listing)
+        raise InvalidField(field, f"{len(garments)} given", listing)
     unknown = [g for g in garments if g not in allowed]
     if unknown:
-        raise InvalidField("garments", f"unknown id(s) {unknown}", listing)
+        raise InvalidField(field, f"unknown id(s) {unknown}", listing)
     repeated = sorted({g for g in garments if garments.count(g) > 1})
     if repeated:
-        raise InvalidField("garments", f"repeated id(s) {repeated}", listing)
+        raise InvalidField(field, f"repeated id(s) {repeated}", listing)
+
+
+UNDER_RULE = "garment ids worn under the style, inner first, other than the style (GET /v1/garments)"
 
 
 class RefusedOrder(InvalidField):
@@ -230,6 +239,7 @@ class ModelEngine:
         self.models = models
         self.model_version = version
         self._dressed = lru_cache(maxsize=BODY_CACHE)(self._dressed_vertices)
+        self._fitter = None
 
     @classmethod
     def load(cls, models_dir: Path, threads: int, imported: list[Path] = ()) -> ModelEngine:
@@ -287,6 +297,30 @@ class ModelEngine:
         report = self.body_report(built)
         layers = [GltfLayer("body", vertices, self.models.body.faces, extras={"body": report})]
         return OutfitResult(outfit_glb(layers), {"body": report}, layers)
+
+    def fit(self, spec: OutfitSpec, style: str) -> dict:
+        from service.pipeline.outfit import MAX_GARMENTS
+        from service.pipeline.size_fit import SizeFitter
+
+        if self._fitter is None:
+            self._fitter = SizeFitter(self.models)
+        styles = sorted(self._fitter.styles)
+        if style not in styles:
+            known = "known" if style in self.models.catalog else "unknown"
+            message = f"{known} garment {style!r} has no sizes"
+            raise InvalidField("style", message, f"one of {', '.join(styles)}")
+        under = spec.garments
+        if under:
+            check_garment_ids(under, self.garment_ids(), MAX_GARMENTS - 1, "under")
+            if style in under:
+                raise InvalidField("under", f"{style!r} is the style fitted", UNDER_RULE)
+            refusals = self.models.refusals([*under, style])
+            if refusals:
+                reasons = "; ".join(r.reason for r in refusals)
+                raise InvalidField("under", f"order refused: {reasons}", ORDER_RULE)
+        built = self.body(spec)
+        report = self._fitter.report(built, self.dressed(spec), style, under)
+        return report | {"body": self.body_report(built)}
 
     def make(self, spec: OutfitSpec) -> OutfitResult:
         from service.pipeline.gltf import outfit_glb

@@ -15,7 +15,7 @@ from fastapi.routing import APIRoute
 
 from service.server import errors, logs
 from service.server.middleware import AccessLog, BodyLimit, GzipJson
-from service.server.routes import admin, bodies, body, garments, outfits, page, probes
+from service.server.routes import admin, bodies, body, fit, garments, outfits, page, probes
 from service.server.routes.garments import CATALOG_NOT_LOADED, try_load_catalog
 from service.server.runtime import EngineFactory, TryOn, load_engine
 from service.server.settings import Settings
@@ -93,6 +93,7 @@ def create_app(settings: Settings | None = None, engine_factory: EngineFactory =
     app.include_router(garments.router)
     app.include_router(outfits.router)
     app.include_router(bodies.router)
+    app.include_router(fit.router)
     app.include_router(body.router)
     app.include_router(admin.router)
     app.include_router(page.router)

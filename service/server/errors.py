@@ -18,7 +18,7 @@ from starlette.exceptions import HTTPException
 from service.pipeline.tryon import GARMENT_ID_RULE, InvalidField
 from service.server import outfit_url
 from service.server.runtime import NotReady
-from service.server.schemas import ALLOWED, BODY_ALLOWED
+from service.server.schemas import ALLOWED, BODY_ALLOWED, FIT_ALLOWED
 from service.server.worker import DeadlineExceeded, Overloaded
 
 NOT_READY_RETRY_S = 5
@@ -52,7 +52,9 @@ def _allowed(path: str, extra: bool, allowed: dict[str, str]) -> str:
 
 def allowed_for(url_path: str) -> dict[str, str]:
     """What each field accepts on the route of ``url_path``: the bodies' routes have fewer fields."""
-    return ALLOWED | BODY_ALLOWED if url_path.startswith("/v1/bodies") else ALLOWED
+    if url_path.startswith("/v1/bodies"):
+        return ALLOWED | BODY_ALLOWED
+    return ALLOWED | FIT_ALLOWED if url_path.startswith("/v1/fit") else ALLOWED
 
 
 def field_errors(errors: list[dict], garment_ids: list[str], allowed: dict[str, str] = ALLOWED) -> list[dict]:
@@ -67,14 +69,14 @@ def field_errors(errors: list[dict], garment_ids: list[str], allowed: dict[str, 
         elif kind == "json_invalid":
             message = f"malformed JSON ({e.get('ctx', {}).get('error', 'decode error')})"
             path = ""
-        elif kind == "string_pattern_mismatch" and path.startswith("garments"):
+        elif kind == "string_pattern_mismatch" and path.startswith(("garments", "under", "style")):
             # a catalog id never breaks the id rule: say the id is unknown, and list the known ones
             message = f"unknown garment id {e.get('input')!r} (ids are {GARMENT_ID_RULE})"
         else:
             message = outfit_url.message(e)
         extra = kind == "extra_forbidden"
         accepts = _allowed(path, extra, allowed)
-        if path.startswith("garments") and garment_ids and not extra:  # not a field the route lacks
+        if path.startswith(("garments", "under", "style")) and garment_ids and not extra:  # ids it lacks
             accepts += ": " + ", ".join(garment_ids)
         out.append({"field": path or "(request body)", "message": message, "allowed": accepts})
     return out

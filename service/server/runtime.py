@@ -217,6 +217,20 @@ class TryOn:
         return await self._serve(body_id(spec, engine.model_version), spec, engine, compression,
                                  engine.make_body, None)  # fmt: skip
 
+    async def fit(self, spec: OutfitSpec, style: str) -> dict:
+        """``Engine.fit`` in the pool, under the request's time budget (no cache: tens of ms).
+        Raises NotReady, InvalidField, Overloaded, DeadlineExceeded."""
+        engine = self.require_engine()
+        timeout = self.settings.request_timeout_s
+        future = self.worker.submit(lambda: engine.fit(spec, style), time.monotonic() + timeout)
+        wrapped = asyncio.wrap_future(future)
+        done, _ = await asyncio.wait({wrapped}, timeout=timeout)
+        if not done:
+            wrapped.add_done_callback(lambda f: f.cancelled() or f.exception())
+            self.metrics.rejected.labels("deadline").inc()
+            raise DeadlineExceeded(f"no fit within the {timeout:g} s time budget")
+        return wrapped.result()
+
     async def _serve(
         self, key: str, spec: OutfitSpec, engine: Engine, compression: str, make: Make,
         validate: Callable[[OutfitSpec], None] | None,

@@ -55,6 +55,12 @@ ALLOWED = {
     "query.height_cm": f"a number from {HEIGHT_CM[0]:g} to {HEIGHT_CM[1]:g}",
     "query.weight_kg": f"a number from {WEIGHT_KG[0]:g} to {WEIGHT_KG[1]:g}",
 }
+# What POST /v1/fit accepts where it differs from the outfits' (``ALLOWED``).
+FIT_ALLOWED = {
+    "": "a JSON object with `style` (required), `under` and `body`",
+    "style": "a garment id with sizes (GET /v1/garments)",
+    "under": f"a list of 0-{MAX_GARMENTS - 1} distinct garment ids worn under the style, inner first",
+}
 # What POST /v1/bodies and GET /v1/bodies.glb accept where it differs from the outfits' (``ALLOWED``).
 BODY_ALLOWED = {
     "": "a JSON object with `body` and `options`",
@@ -258,6 +264,85 @@ class BodyCreated(BaseModel):
 
     body: BodyReport = Field(description="The body as built, measured on its mesh.")
     glb_url: str = Field(description="GET it for the body's GLB, on any replica (signed with API keys on).")
+
+
+REGION = Literal["chest", "waist", "waistband", "hip", "thigh", "upper_arm"]
+SIZE = Literal["XS", "S", "M", "L", "XL", "XXL"]
+
+
+class FitRequest(BaseModel):
+    model_config = ConfigDict(
+        extra="forbid",
+        strict=True,
+        json_schema_extra={
+            "examples": [{"style": "jacket", "under": ["tshirt"],
+                          "body": {"gender": 1.0, "height_cm": 165, "weight_kg": 60, "hip_cm": 100}}]
+        },
+    )  # fmt: skip
+
+    style: GarmentId = Field(description="The garment whose sizes are fitted (a style with sizes).")
+    under: list[GarmentId] = Field(
+        default_factory=list, max_length=MAX_GARMENTS - 1,
+        description="Garments worn under it, inner first: their girths are under the style's (a jacket over "
+        "a sweater fits tighter than over a tank top).",
+    )  # fmt: skip
+    body: BodyShape = Field(default_factory=BodyShape)
+
+    @field_validator("under")
+    @classmethod
+    def _distinct(cls, ids: list[str]) -> list[str]:
+        repeated = sorted({g for g in ids if ids.count(g) > 1})
+        if repeated:
+            raise ValueError(f"repeated id(s) {repeated}")
+        return ids
+
+    def spec(self) -> OutfitSpec:
+        """The body and the layers under, as an ``OutfitSpec`` (``ModelEngine.fit``)."""
+        return self.body.spec(tuple(self.under))
+
+
+class FitRegion(BaseModel):
+    garment_cm: float = Field(description="The size's girth there: its finished measurement (docs/fit.md).")
+    under_cm: float = Field(description="A tape over the body and every layer under the style there.")
+    ease_cm: float = Field(description="garment_cm - under_cm; negative: smaller than what it goes round.")
+    body_ease_cm: float = Field(description="The ease over the body alone, as a size chart reckons it.")
+
+
+class FitSize(BaseModel):
+    fits: bool = Field(
+        description="Every region's ease over the body is at least its design ease less 4 cm, and over the "
+        "layers under it at least 3.8 cm (docs/fit.md)."
+    )
+    regions: dict[REGION, FitRegion] = Field(description="The regions the style goes round on this body.")
+
+
+class FitRecommendation(BaseModel):
+    size: SIZE = Field(description="The smallest size that fits; none fitting, the largest.")
+    fits: bool = Field(description="Whether `size` fits (false: no size of the chart does).")
+    short: list[REGION] = Field(description="Regions where `size` is short of its minimum ease.")
+    runner_up: SIZE | None = Field(description="The neighbouring size, where a fit or miss is within 2 cm.")
+    runner_up_is: Literal["roomier", "closer"] | None = Field(description="What the runner-up would be.")
+
+
+class FitAnswer(BaseModel):
+    model_config = ConfigDict(json_schema_extra={"example": {
+        "style": "tshirt", "run": "men", "under": [], "rule": "smallest-size-with-design-ease/v2",
+        "recommended": {"size": "M", "fits": True, "short": [], "runner_up": None, "runner_up_is": None},
+        "design_ease_cm": {"chest": 9.0, "waist": 8.6, "hip": 8.5},
+        "sizes": {"M": {"fits": True,
+                        "regions": {"chest": {"garment_cm": 106.9, "under_cm": 97.9, "ease_cm": 9.0,
+                                              "body_ease_cm": 9.0}}}},
+        "body": BODY_EXAMPLE,
+    }})  # fmt: skip
+
+    style: str = Field(description="The style fitted.")
+    run: Literal["men", "women"] = Field(description="The size chart its sizes are cut on (docs/fit.md).")
+    under: list[str] = Field(description="The garments under it, inner first.")
+    rule: str = Field(description="The rule that picked `recommended` (docs/fit.md), with its version.")
+    recommended: FitRecommendation
+    design_ease_cm: dict[REGION, float] = Field(description="The style's intended ease per region (its M).")
+    sizes: dict[SIZE, FitSize] = Field(description="Every size's fit on this body, by region.")
+    body: BodyReport = Field(description="The body as built, measured on its mesh.")
 
 
 class FieldError(BaseModel):
