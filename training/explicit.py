@@ -16,7 +16,8 @@ Training shapes (decision 0023): the drapes of real adults (``data/drapes``, ``t
 reach the population's tails but hold two adults per sex and BMI band, plus the unextended box's
 drapes (``--box-data``, ``training.drape --source box``), dense where most shoppers are. Where the box
 drapes are not on disk, ``--box-models DIR`` stands in for them: the box-trained models of an earlier
-tree (0.8-4.2 mm off their held-out drapes), asked at ``BOX_STANDIN_CODES`` Sobol codes of the box.
+tree (0.8-4.2 mm off their held-out drapes), asked at ``BOX_STANDIN_CODES`` Sobol codes of the box
+and at its 8 inset corners, as the box dataset's training split held them.
 """
 
 from __future__ import annotations
@@ -137,9 +138,13 @@ def box_training(gid: str, box_data: Path | None, box_models: Path | None) -> tu
         split = load_split(box_data, "train", gid)
         return split["beta"], split["canonical"].astype(np.float64)
     if box_models is not None:
-        from training.drape.dataset import sample_betas
+        from training.drape.dataset import DatasetConfig, box_corners, sample_betas
 
-        betas = sample_betas(BOX_STANDIN_CODES, BOX_STANDIN_SEED)
+        # The box dataset's training split held its 8 corners inset as well as Sobol shapes; the
+        # stand-in asks the box models there too (without them the garments at the box's extreme
+        # corners moved 7-28 mm and 4 random stacks on the shortest, lightest woman crossed).
+        corners = box_corners(DatasetConfig(source="box").corner_inset)
+        betas = np.concatenate([sample_betas(BOX_STANDIN_CODES, BOX_STANDIN_SEED), corners])
         model = ExplicitModel.load(gid, box_models)
         return betas, np.stack([model.canonical(b) for b in betas])
     return np.zeros((0, 3)), None
