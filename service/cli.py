@@ -172,6 +172,29 @@ def cmd_outfit(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_fit(args: argparse.Namespace) -> int:
+    """Each size of a style on a body over the garments under it, and the size to buy, as JSON
+    (``POST /v1/fit``'s answer)."""
+    from service.pipeline.outfit import OutfitModels
+    from service.pipeline.tryon import InvalidField, ModelEngine, OutfitSpec
+
+    problem = body_problem(args)
+    if problem is not None:
+        print(f"ulnef fit: {problem}", file=sys.stderr)
+        return 2
+    engine = ModelEngine(OutfitModels.load(threads=args.threads), "cli")
+    under = tuple(g for g in args.under.split(",") if g)
+    try:
+        answer = engine.fit(OutfitSpec(under, **body_values(args)), args.style)
+    except InvalidField as err:
+        body_field = option(err.field.removeprefix("body."))
+        where = f"--{err.field}" if err.field in ("style", "under") else body_field
+        print(f"ulnef fit: {where}: {err} (allowed: {err.allowed})", file=sys.stderr)
+        return 2
+    print(json.dumps(answer, indent=2))
+    return 0
+
+
 def cmd_avatar(args: argparse.Namespace) -> int:
     """Write the avatar a shop drapes its garments on (GLB or OBJ) and its measurements as JSON; with
     any body option, a shopper's body instead (``write_body``)."""
@@ -307,6 +330,14 @@ def build_parser() -> argparse.ArgumentParser:
     avatar.add_argument("--units", choices=("m", "cm", "mm"), default="m", help="(default: %(default)s)")
     add_body_options(avatar)
     avatar.set_defaults(func=cmd_avatar)
+
+    fit = sub.add_parser("fit", help="each size of a style on a body, and the size to buy (JSON)")
+    fit.add_argument("--style", required=True, help="a garment id with sizes (docs/fit.md)")
+    fit.add_argument("--under", default="", help="comma-separated ids worn under it, inner first")
+    add_body_options(fit)
+    fit.add_argument("--threads", type=positive_int, default=2,
+                     help="onnxruntime threads (default: %(default)s)")  # fmt: skip
+    fit.set_defaults(func=cmd_fit)
 
     openapi = sub.add_parser("openapi", help="write the HTTP API's OpenAPI schema as YAML")
     openapi.add_argument("-o", "--output", default="-", help="output file, '-' for stdout (default: stdout)")

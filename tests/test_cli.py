@@ -190,3 +190,24 @@ def test_avatar_writes_a_shoppers_body_and_prints_its_measurements(tmp_path, cap
     assert abs(body["hip_cm"] - 100) <= 1.0
     assert body_node(target.read_bytes())["extras"] == report
     assert not target.with_suffix(".json").exists()  # avatar.json is the mean avatar's, for garment import
+
+
+def test_fit_prints_each_size_and_the_size_to_buy(capsys):
+    argv = ["fit", "--style", "tshirt", "--height-cm", "178", "--weight-kg", "80", "--threads", "1"]
+    assert main(argv) == 0
+    answer = json.loads(capsys.readouterr().out)
+    assert answer["style"] == "tshirt" and answer["recommended"]["size"] in answer["sizes"]
+    assert answer["body"]["height_cm"] == 178.0
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--style", "hat"], "ulnef fit: --style: unknown garment 'hat' has no sizes (allowed: one of"),
+        (["--style", "jacket", "--under", "jacket"], "ulnef fit: --under: 'jacket' is the style fitted"),
+        (["--style", "jacket", "--height-cm", "300"], "ulnef fit: --height-cm: "),
+    ],
+)
+def test_fit_refuses_what_it_cannot_fit_with_exit_2(argv, message, capsys):
+    assert main(["fit", *argv, "--threads", "1"]) == 2
+    assert capsys.readouterr().err.startswith(message)

@@ -61,7 +61,9 @@ def test_layers_under_a_jacket_take_its_room(client: TestClient):
     fits = [client.post("/v1/fit", json={"style": "jacket", "under": under, "body": body}).json()
             for under in ([], ["tank_top"], ["tshirt"], ["tank_top", "tshirt"])]  # fmt: skip
     chest = [f["sizes"]["L"]["regions"]["chest"]["ease_cm"] for f in fits]
-    assert chest[0] > chest[1] and chest[0] > chest[2] > chest[3], chest
+    # Each layer lies on the body alone (its explicit model): a tank top under a T-shirt takes no more
+    # room than the T-shirt where the T-shirt is loose over it.
+    assert chest[0] > chest[1] and chest[0] > chest[2] >= chest[3] and chest[1] > chest[2], chest
     # over the body alone the size chart's reckoning is the same whatever is under
     assert len({f["sizes"]["L"]["regions"]["chest"]["body_ease_cm"] for f in fits}) == 1
     assert fits[2]["under"] == ["tshirt"]
