@@ -117,8 +117,10 @@ def main(argv=None) -> None:
         images.append(np.concatenate([render(layers, "front", 420, camera=camera),
                                       render(tension, "front", 420, camera=camera)], axis=1))  # fmt: skip
         p95 = 100 * np.percentile(strain, 95)
-        titles.append(f"{args.garment} {letter} (cut for chest {record['row']['chest_cm']:g} cm) on chest "
-                      f"{built.measured.chest_cm:.0f} cm: strain p95 {p95:.0f} %")
+        girth = "hip" if garment.category == "bottom" else "chest"  # the girth its size is read by
+        cut, worn = record["row"][f"{girth}_cm"], getattr(built.measured, f"{girth}_cm")
+        titles.append(f"{args.garment} {letter} (cut for {girth} {cut:g} cm) on {girth} {worn:.0f} cm: "
+                      f"strain p95 {p95:.0f} %")
     out = save_png(args.out / f"sizes_{args.garment}.png", grid(images, titles, columns=2))
     print(f"wrote {out}")
 
