@@ -162,3 +162,27 @@ def test_a_styles_ease_is_its_design_ease_at_every_size(sizes):
         for letter, eases in entry["chart_ease"].items():
             for region, ease in eases.items():
                 assert abs(ease - entry["design_ease"][region]) < EASE_TOLERANCE_CM, (style, letter, region)
+
+
+def test_every_chart_body_measures_its_row():
+    """The committed chart bodies (``python -m training.garments.grading``) reproduce their rows as
+    issue 55 reproduces a shopper's: height within 0.5 cm, each girth within 1 cm."""
+    charts = json.loads((models_dir() / "garments" / "size_charts.json").read_text())
+    assert set(charts) == {f"{run}/{letter}" for run in RUNS for letter in LETTERS}
+    for key, record in charts.items():
+        row, body = record["row"], record["body"]
+        assert abs(body["height_cm"] - row["height_cm"]) <= 0.5, key
+        for name in ("chest_cm", "waist_cm", "hip_cm"):
+            assert abs(body[name] - row[name]) <= 1.0, (key, name)
+        assert body["predicted"] == []
+
+
+def test_a_chart_body_is_built_again_from_its_request():
+    from service.pipeline.body_build import BodyRequest
+    from training.garments.grading import chart_builder
+
+    record = json.loads((models_dir() / "garments" / "size_charts.json").read_text())["men/M"]
+    built = chart_builder().build(BodyRequest(**record["request"]))
+    report = built.report()
+    for name in ("height_cm", "weight_kg", "chest_cm", "waist_cm", "hip_cm"):
+        assert report[name] == pytest.approx(record["body"][name], abs=0.11), name
