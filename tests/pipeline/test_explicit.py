@@ -202,13 +202,18 @@ def test_served_explicit_garments_stay_out_of_the_body_at_every_corner_of_the_bo
 
 
 def test_the_box_part_of_the_training_set_is_the_box_drapes_or_the_box_models_standing_in(tmp_path):
+    from training.drape.dataset import DatasetConfig, box_corners
     from training.explicit import BOX_STANDIN_CODES, box_training
 
     betas, canonical = _synthetic()
     model = fit_explicit("tshirt", betas, canonical, ExplicitConfig(iterations=50, offsets=False))
     model.save(tmp_path / "models" / "tshirt.npz")
     codes, meshes = box_training("tshirt", None, tmp_path / "models")
-    assert codes.shape == (BOX_STANDIN_CODES, 3) and np.all((codes >= 0.0) & (codes <= 1.0))
-    np.testing.assert_allclose(meshes[7], model.canonical(codes[7]))
+    # Sobol codes of the box, then its 8 inset corners, as the box dataset's training split held them.
+    assert codes.shape == (BOX_STANDIN_CODES + 8, 3) and np.all((codes >= 0.0) & (codes <= 1.0))
+    corners = box_corners(DatasetConfig(source="box").corner_inset)
+    np.testing.assert_array_equal(codes[BOX_STANDIN_CODES:], corners)
+    for k in (7, BOX_STANDIN_CODES + 3):
+        np.testing.assert_allclose(meshes[k], model.canonical(codes[k]))
     none, nothing = box_training("tshirt", None, None)
     assert none.shape == (0, 3) and nothing is None
