@@ -193,12 +193,16 @@ def test_the_far_bounds_are_below_the_distances_on_every_body(models, held_out_b
         assert (bounds[2][:, 1] >= FAR_FIELD).mean() > 0.3  # the jacket's sleeves and collar, from the pants
 
 
-@pytest.mark.parametrize("ids", [["long_sleeve", "tank_top"], ["shorts", "pants"]])
-def test_an_outer_garment_comes_down_around_a_lower_junction(models, held_out_beta, monkeypatch, ids):
+# (ids, which of the outfit benchmark's 8 bodies, seed 3): each pair on a body where it crosses without
+# the let-down. With the garment models retrained on the population and the box's corners, the shorts
+# over the pants crossed without it on bodies 3 and 7 (13 and 22 pairs), no longer on body 1.
+@pytest.mark.parametrize(("ids", "body"), [(["long_sleeve", "tank_top"], 1), (["shorts", "pants"], 7)])
+def test_an_outer_garment_comes_down_around_a_lower_junction(models, monkeypatch, ids, body):
     # The long sleeve's armhole hangs below the tank top's, the shorts' crotch below the pants': the
     # outer garment is let down there (collisions.junctions) and the pair comes out clean; without
     # that, the same pair on the same body crosses (164 and 40 pairs when this was written) where the
     # repair only pushes (no ``lifts``, which since clear the long sleeve's alone).
+    held_out_beta = sample_betas(8, 3)[body]
     assert models.pairs.lowering(*ids) is not None
     r = make_outfit(models, ids, held_out_beta, measure=True).report
     assert r["collision_free"] and _tangle(r, "after") == (0, 0.0)

@@ -53,6 +53,9 @@ class ExplicitOnly:
     def make_body(self, spec: OutfitSpec) -> OutfitResult:
         return self.engine.make_body(spec)
 
+    def fit(self, spec: OutfitSpec, style: str) -> dict:
+        return self.engine.fit(spec, style)
+
 
 def test_schemathesis_finds_no_server_errors(tmp_path: Path):
     full = os.environ.get("ULNEF_SCHEMATHESIS_UNTANGLE") == "1"
