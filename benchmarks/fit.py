@@ -92,7 +92,7 @@ def main(argv=None) -> None:
             g = catalog[style]
             carried = space.to_body(g.vertices, built.vertices)
             layer = Layer(carried, g.faces, parts[style], g.openings.get("waist"))
-            under = {r: u for r, (_, u) in girths(body, layer).items()}
+            under = {r: u for r, (_, u, _) in girths(body, layer).items()}
             eases = {s: {r: entry["girths"][s][r] - under[r] for r in entry["girths"][s] if r in under}
                      for s in LETTERS}  # fmt: skip
             got = recommend(eases, entry["design_ease"])

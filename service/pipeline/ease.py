@@ -4,6 +4,7 @@ Regions, each a plane on the wearer's body (``region_planes``):
 
 - ``chest``, ``waist``, ``hip``: horizontal at the levels the body's tape measurements were taken
   (``service.pipeline.measurements``; ISO 8559-1 chest or bust, natural waist, hip);
+- ``waistband``: a bottom's, horizontal ``WAISTBAND_BELOW_M`` under its waist opening;
 - ``thigh``: horizontal, ``THIGH_BELOW_CROTCH_M`` below the crotch, around the left leg (ISO 8559-1's
   thigh girth is taken just below the gluteal fold);
 - ``upper_arm``: across the left upper arm at its middle, square to its axis (Anny's rest pose is
@@ -20,11 +21,10 @@ sleeve's faces are left out of the chest's section where an A-pose sleeve touche
   together: a jacket over a sweater has the sweater under it.
 - **Ease** = the garment's girth - what is under it (cm; negative: smaller than what it must go round).
 - **Strain** is the cloth's: per triangle, the largest principal stretch of the worn mesh against its
-  rest shape, minus 1 (``principal_strain``); per region, its area-weighted mean over the triangles
-  within ``BAND_M`` of the plane.
+  rest shape, minus 1 (``principal_strain``).
 
-A region counts for a garment only where the garment goes round it (``covers``): a tank top has no
-upper arm, a skirt no thigh.
+A region counts for a garment only where the garment goes round it (``garment_section``): a tank top
+has no upper arm, a skirt no thigh.
 """
 
 from __future__ import annotations
@@ -44,8 +44,7 @@ THIGH_BELOW_CROTCH_M = 0.04  # just below the gluteal fold on Anny's bodies (a f
 WAISTBAND_BELOW_M = 0.02  # a bottom's waist: this far under its waistband's mean height
 ARM_JOINTS = ("upperarm01.L", "lowerarm01.L")  # shoulder and elbow: the upper arm's axis
 JOINT_RING = 40  # vertices nearest a joint on the default body carry it to others (it lies 3-6 cm in)
-BAND_M = 0.02  # triangles this near a region's plane give its strain
-LIMB_STRAIN_M = 0.15  # and, for a limb's slanted plane, this near its centre (not the torso it cuts)
+THIGH_BAND_M = 0.02  # left-thigh vertices this near the thigh's plane give its centre
 COVER_BINS = 36  # directions (10 degrees apart) around a body section's centre
 # Share of them a garment's section must reach to go round a region: a T-shirt's chest, its sleeves'
 # faces left out, reaches ~80 %; a skirt round one thigh, ~50 %.
@@ -214,19 +213,6 @@ def winding(segments: np.ndarray, point: np.ndarray) -> float:
     return float(angle.sum() / (2 * np.pi))
 
 
-def section_points(vertices: np.ndarray, faces: np.ndarray, plane: Plane) -> np.ndarray:
-    """Where the edges of ``faces (F, 3)`` over ``vertices (V, 3)`` cross ``plane``: ``(N, 2)`` in its
-    (u, v) axes (an edge shared by two faces appears twice; a tape does not mind)."""
-    local = plane.frame(vertices)
-    f = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
-    edges = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
-    da, db = local[edges[:, 0], 2], local[edges[:, 1], 2]
-    crossing = (da > 0) != (db > 0)
-    a, b = local[edges[crossing, 0]], local[edges[crossing, 1]]
-    t = (da[crossing] / (da[crossing] - db[crossing]))[:, None]
-    return (a + t * (b - a))[:, :2]
-
-
 def tape_cm(*sections: np.ndarray) -> float:
     """A tape round every point of ``sections`` (each ``(N_i, 2)``, metres) together, in cm."""
     points = [s for s in sections if s is not None and len(s)]
@@ -256,24 +242,6 @@ def principal_strain(x: np.ndarray, rest: RestShape) -> np.ndarray:
     a, b, d = C[:, 0, 0], C[:, 0, 1], C[:, 1, 1]
     largest = 0.5 * (a + d) + np.sqrt(0.25 * (a - d) ** 2 + b * b)
     return np.sqrt(largest) - 1.0
-
-
-def triangle_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    t = np.asarray(vertices)[np.asarray(faces)]
-    return 0.5 * np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1)
-
-
-def band_strain(
-    x: np.ndarray, faces: np.ndarray, strain: np.ndarray, mask: np.ndarray, plane: Plane
-) -> float:
-    """Area-weighted mean of ``strain (F,)`` over the faces of ``mask (F,)`` whose centre is within
-    ``BAND_M`` of ``plane`` on the worn mesh ``x (V, 3)``; NaN where none is."""
-    centres = np.asarray(x)[faces].mean(axis=1)
-    near = mask & (np.abs((centres - plane.origin) @ plane.normal) <= BAND_M)
-    if plane.limb:  # the plane goes on through the torso: only the faces near the limb
-        near &= np.linalg.norm(plane.frame(centres)[:, :2], axis=1) <= LIMB_STRAIN_M
-    area = triangle_areas(x, faces)[near]
-    return float(np.sum(area * strain[near]) / area.sum()) if area.sum() > 0 else float("nan")
 
 
 @dataclass(frozen=True)
@@ -306,9 +274,11 @@ class BodyRegions:
         return waistband_plane(layer.vertices[layer.waist], self.torso_centre)
 
 
-def girths(body: BodyRegions, layer: Layer, under: tuple[Layer, ...] = ()) -> dict[str, tuple[float, float]]:
-    """For each region ``layer`` goes round: (its girth, the tape over the body and the ``under``
-    layers there), cm."""
+def girths(
+    body: BodyRegions, layer: Layer, under: tuple[Layer, ...] = ()
+) -> dict[str, tuple[float, float, float]]:
+    """For each region ``layer`` goes round: (its girth, the tape over the body alone, the tape over
+    the body and the ``under`` layers there), cm; each body section is cut once."""
     out = {}
     for region in REGIONS:
         cut = body.plane(region, layer)
@@ -320,7 +290,8 @@ def girths(body: BodyRegions, layer: Layer, under: tuple[Layer, ...] = ()) -> di
         if own is None:
             continue
         inner = [garment_section(u.vertices, u.faces, u.parts, plane, section) for u in under]
-        out[region] = (tape_cm(own), tape_cm(section.tape, *inner))
+        skin = tape_cm(section.tape)
+        out[region] = (tape_cm(own), skin, tape_cm(section.tape, *inner) if under else skin)
     return out
 
 
@@ -344,6 +315,6 @@ def body_regions(
     centre = v[marks.torso, :2].mean(axis=0)
     crotch = float(v[marks.crotch, 2].min())
     leg = v[marks.thigh]
-    near = np.abs(leg[:, 2] - (crotch - THIGH_BELOW_CROTCH_M)) <= BAND_M
+    near = np.abs(leg[:, 2] - (crotch - THIGH_BELOW_CROTCH_M)) <= THIGH_BAND_M
     thigh = (leg[near] if near.any() else leg)[:, :2].mean(axis=0)
     return BodyRegions(v, faces, region_planes(v, levels_m, centre, crotch, thigh, marks.arm), centre)

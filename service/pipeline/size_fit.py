@@ -52,8 +52,9 @@ class SizeFitter:
         beta = built.garment_beta
         own = self.worn(style, beta, dressed)
         layers = tuple(self.worn(g, beta, dressed) for g in under)
-        skin = {r: u for r, (_, u) in girths(body, own).items()}
-        tapes = {r: u for r, (_, u) in girths(body, own, layers).items()} if layers else skin
+        cut = girths(body, own, layers)
+        skin = {r: body_cm for r, (_, body_cm, _) in cut.items()}
+        tapes = {r: under_cm for r, (_, _, under_cm) in cut.items()}
         design = entry["design_ease"]
         eases, over = ({size: {r: g - t[r] for r, g in girth.items() if r in t}
                         for size, girth in entry["girths"].items()} for t in (skin, tapes))  # fmt: skip

@@ -30,10 +30,9 @@ from pathlib import Path
 
 import numpy as np
 
-from service.pipeline.body import BodyModel
+from service.pipeline.body import DEFAULT_BETA, BodyModel
 from service.pipeline.ease import ARM_JOINTS, RegionMarks, joint
 from service.pipeline.measurements import Landmarks
-from service.pipeline.sizes import LETTERS
 from service.process.paths import models_dir
 
 SIZES_NAME = "sizes.json"
@@ -50,31 +49,11 @@ DESIGN_SIZE = "M"
 
 def region_marks(model: BodyModel, marks: Landmarks) -> RegionMarks:
     """Where Anny's topology is cut for the regions (``ease.RegionMarks``)."""
-    from service.pipeline.body import DEFAULT_BETA
-
     default = model.vertices(np.asarray(DEFAULT_BETA))
     bones = dict(zip(model.bone_names, model.bone_heads, strict=True))
     leg = np.flatnonzero(model.regions == model.region_names.index("upperleg_l"))
     arm = tuple(joint(default, bones[name]) for name in ARM_JOINTS)
     return RegionMarks(marks.torso, marks.crotch, leg, arm)
-
-
-@dataclass(frozen=True)
-class StyleSizes:
-    """A style's sizes: its ``run``, and per size letter its girth per region (cm)."""
-
-    style: str
-    run: str
-    girths: dict[str, dict[str, float]]
-
-    @property
-    def letters(self) -> tuple[str, ...]:
-        return tuple(letter for letter in LETTERS if letter in self.girths)
-
-    def design_ease(self, chart_under: dict[str, float]) -> dict[str, float]:
-        """Ease per region of the design size on its chart body (``chart_under``: that body's tapes)."""
-        own = self.girths[DESIGN_SIZE]
-        return {r: own[r] - chart_under[r] for r in own if r in chart_under}
 
 
 @lru_cache(maxsize=4)

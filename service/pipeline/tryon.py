@@ -161,12 +161,12 @@ ORDER_RULE = (
 )
 
 
-def check_order(refusals: list) -> None:
-    """Raise ``InvalidField("garments", ...)`` naming each refused pair and why
+def check_order(refusals: list, field: str = "garments") -> None:
+    """Raise ``InvalidField(field, ...)`` naming each refused pair and why
     (``service.pipeline.collisions.layering``)."""
     if refusals:
         reasons = "; ".join(r.reason for r in refusals)
-        raise RefusedOrder("garments", f"order refused: {reasons}", ORDER_RULE)
+        raise RefusedOrder(field, f"order refused: {reasons}", ORDER_RULE)
 
 
 def model_version(models_dir: Path) -> str:
@@ -314,10 +314,7 @@ class ModelEngine:
             check_garment_ids(under, self.garment_ids(), MAX_GARMENTS - 1, "under")
             if style in under:
                 raise InvalidField("under", f"{style!r} is the style fitted", UNDER_RULE)
-            refusals = self.models.refusals([*under, style])
-            if refusals:
-                reasons = "; ".join(r.reason for r in refusals)
-                raise InvalidField("under", f"order refused: {reasons}", ORDER_RULE)
+            check_order(self.models.refusals([*under, style]), "under")
         built = self.body(spec)
         report = self._fitter.report(built, self.dressed(spec), style, under)
         return report | {"body": self.body_report(built)}

@@ -74,6 +74,14 @@ PREDICTED = ("predicted from height and weight (and the girths given) when missi
              "have is refused with the range possible (GET /v1/body/ranges).")  # fmt: skip
 
 
+def distinct_ids(ids: list[str]) -> list[str]:
+    """``ids``, or a ValueError naming the ones given more than once."""
+    repeated = sorted({g for g in ids if ids.count(g) > 1})
+    if repeated:
+        raise ValueError(f"repeated id(s) {repeated}")
+    return ids
+
+
 class BodyShape(BaseModel):
     model_config = CLOSED
 
@@ -162,10 +170,7 @@ class OutfitRequest(BaseModel):
     @field_validator("garments")
     @classmethod
     def _distinct(cls, ids: list[str]) -> list[str]:
-        repeated = sorted({g for g in ids if ids.count(g) > 1})
-        if repeated:
-            raise ValueError(f"repeated id(s) {repeated}")
-        return ids
+        return distinct_ids(ids)
 
     def spec(self) -> OutfitSpec:
         o = self.options
@@ -291,10 +296,7 @@ class FitRequest(BaseModel):
     @field_validator("under")
     @classmethod
     def _distinct(cls, ids: list[str]) -> list[str]:
-        repeated = sorted({g for g in ids if ids.count(g) > 1})
-        if repeated:
-            raise ValueError(f"repeated id(s) {repeated}")
-        return ids
+        return distinct_ids(ids)
 
     def spec(self) -> OutfitSpec:
         """The body and the layers under, as an ``OutfitSpec`` (``ModelEngine.fit``)."""

@@ -96,11 +96,6 @@ def chart_builder() -> BodyBuilder:
     return BodyBuilder(model, GirthPriors.load(), BodyTable.load(models_dir() / "body" / TABLE_NAME))
 
 
-def chart_bodies(builder: BodyBuilder, run: str) -> dict[str, BuiltBody]:
-    """letter -> the chart body of that size of ``run``."""
-    return {row.letter: chart_body(builder, run, row)[0] for row in chart(run)}
-
-
 def graded_rest(space: CanonicalSpace, template: np.ndarray, chart_body: np.ndarray) -> np.ndarray:
     """A size's rest shape ``(V, 3)``: the template ``(V, 3)`` (on the mean body) carried onto the
     size's chart body ``(B, 3)``."""
@@ -164,8 +159,8 @@ def style_sizes(builder: BodyBuilder, charts: dict, garment, run: str) -> dict:
         body = body_regions(built.vertices, model.faces, built.measured.levels_m, marks)
         rest = graded_rest(space, garment.vertices, built.vertices)
         measured = girths(body, Layer(rest, garment.faces, parts, waist))
-        out["girths"][letter] = {r: round(own, 2) for r, (own, _) in measured.items()}
-        out["chart_ease"][letter] = {r: round(own - under, 2) for r, (own, under) in measured.items()}
+        out["girths"][letter] = {r: round(own, 2) for r, (own, _, _) in measured.items()}
+        out["chart_ease"][letter] = {r: round(own - under, 2) for r, (own, under, _) in measured.items()}
     out["design_ease"] = out["chart_ease"][DESIGN_SIZE]
     return out
 
