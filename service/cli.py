@@ -11,6 +11,7 @@ from pathlib import Path
 
 from service.process.jit_cache import seed_jit_cache
 from service.server.app import CATALOG_NOT_LOADED, create_app, try_load_catalog
+from service.server.routes.garments import catalog_sizes
 from service.server.routes.page import openapi_yaml
 from service.server.settings import Settings
 
@@ -22,6 +23,7 @@ TABLE_COLUMNS = (
     ("vertices", "vertices"),
     ("faces", "faces"),
     ("openings", "openings"),
+    ("sizes", "sizes"),
 )
 
 
@@ -72,7 +74,8 @@ def cmd_garments(args: argparse.Namespace) -> int:
     if catalog is None:
         print(f"ulnef: {CATALOG_NOT_LOADED} (set ULNEF_MODELS_DIR or build models/garments)", file=sys.stderr)
         return 1
-    rows = [g.summary() for g in catalog.values()]
+    sizes = catalog_sizes(Settings())
+    rows = [g.summary() | {"sizes": sizes.get(gid, [])} for gid, g in catalog.items()]
     print(json.dumps({"garments": rows}, indent=2) if args.json else format_table(rows))
     return 0
 
@@ -112,12 +115,18 @@ def body_problem(args: argparse.Namespace) -> str | None:
     return None
 
 
+def garment_tokens(text: str) -> tuple[tuple[str, ...], tuple[str | None, ...]]:
+    """``--garments pants,tshirt:L`` -> (ids, sizes): each token ``id`` or ``id:SIZE`` (None: one size)."""
+    tokens = [t.partition(":") for t in text.split(",") if t]
+    return tuple(t[0] for t in tokens), tuple(t[2] if t[1] else None for t in tokens)
+
+
 def outfit_input_problem(args: argparse.Namespace, catalog: dict | None) -> str | None:
     """What is wrong with ``ulnef outfit``'s arguments, found before the models load (seconds), or None."""
     from service.pipeline.outfit import MAX_GARMENTS
     from service.pipeline.tryon import GARMENT_ID, GARMENT_ID_RULE
 
-    ids = [g for g in args.garments.split(",") if g]
+    ids, sizes = (list(t) for t in garment_tokens(args.garments))
     if not 1 <= len(ids) <= MAX_GARMENTS:
         return f"--garments: give 1-{MAX_GARMENTS} comma-separated garment ids (`ulnef garments` lists them)"
     malformed = [g for g in ids if not re.fullmatch(GARMENT_ID, g)]
@@ -128,6 +137,11 @@ def outfit_input_problem(args: argparse.Namespace, catalog: dict | None) -> str 
         return f"--garments: unknown id(s) {unknown}; allowed: {', '.join(catalog)}"
     if len(set(ids)) != len(ids):
         return f"--garments: each id at most once, got {ids}"
+    known = catalog_sizes(Settings())
+    for gid, size in zip(ids, sizes, strict=True):
+        if size is not None and size not in known.get(gid, []):
+            has = ", ".join(known.get(gid, [])) or "none (it comes in one size)"
+            return f"--garments: {gid!r} has no size {size!r}; its sizes: {has}"
     output = Path(args.output)
     if not output.parent.is_dir():
         return f"-o {output}: no such directory {output.parent}"
@@ -136,6 +150,8 @@ def outfit_input_problem(args: argparse.Namespace, catalog: dict | None) -> str 
 
 def refusal(err) -> str:
     """An ``InvalidField`` as the CLI names it: ``--height-cm: ...`` for ``body.height_cm``."""
+    if err.field.startswith("garments"):
+        return f"--garments: {err} (allowed: {err.allowed})"
     return f"{option(err.field.removeprefix('body.'))}: {err}"
 
 
@@ -151,9 +167,9 @@ def cmd_outfit(args: argparse.Namespace) -> int:
         return 2
     models = OutfitModels.load(threads=args.threads, imported=verified_imports(Settings().garments_dir)[0])
     engine = ModelEngine(models, "cli")
-    spec = OutfitSpec(tuple(g for g in args.garments.split(",") if g), **body_values(args),
-                      untangle=not args.no_untangle, include_body=not args.no_body,
-                      untangler=args.untangler)  # fmt: skip
+    ids, sizes = garment_tokens(args.garments)
+    spec = OutfitSpec(ids, **body_values(args), untangle=not args.no_untangle, include_body=not args.no_body,
+                      untangler=args.untangler, sizes=sizes)  # fmt: skip
     try:
         engine.validate(spec)  # the order, and a combination of girths no body has
         result = engine.make(spec)
@@ -312,7 +328,8 @@ def build_parser() -> argparse.ArgumentParser:
     garments.set_defaults(func=cmd_garments)
 
     outfit = sub.add_parser("outfit", help="dress a body in garments (inner to outer) and write a GLB")
-    outfit.add_argument("--garments", required=True, help="comma-separated ids, inner to outer")
+    outfit.add_argument("--garments", required=True,
+                        help="comma-separated ids, inner to outer, each `id` or `id:SIZE` (tshirt:L)")
     add_body_options(outfit)
     outfit.add_argument("--untangler", choices=("neural", "reference"), default="neural")
     outfit.add_argument("--no-untangle", action="store_true", help="explicit meshes only (tangled)")

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from service.pipeline.catalog import Garment, load_catalog, save_garment
+from tests.service_tools import FAKE_SIZES
 
 
 @pytest.fixture(scope="session", autouse=True)
@@ -67,7 +68,8 @@ def tiny_garments() -> list[Garment]:
 
 @pytest.fixture
 def fake_models_dir(tmp_path: Path) -> Path:
-    """A models directory whose ``garments/`` holds the catalog of ``tiny_garments()``."""
+    """A models directory whose ``garments/`` holds the catalog of ``tiny_garments()``, the T-shirt in
+    sizes (``sizes.json``: its letters only, as ``tests.service_tools.FAKE_SIZES``)."""
     directory = tmp_path / "models" / "garments"
     entries = []
     for garment in tiny_garments():
@@ -82,4 +84,7 @@ def fake_models_dir(tmp_path: Path) -> Path:
             }
         )
     (directory / "catalog.json").write_text(json.dumps({"garments": entries}, indent=2))
+    girths = {letter: {} for letter in FAKE_SIZES["tshirt"].letters}
+    sizes = {"styles": {"tshirt": {"run": "men", "girths": girths}}}
+    (directory / "sizes.json").write_text(json.dumps(sizes))
     return directory.parent

@@ -18,6 +18,7 @@ import sys
 import tempfile
 import threading
 import time
+import types
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -28,7 +29,15 @@ import uvicorn
 
 from service.pipeline.catalog import Garment
 from service.pipeline.gltf import GltfLayer, outfit_glb
-from service.pipeline.tryon import GIRTH_FIELDS, InvalidField, OutfitResult, OutfitSpec, check_garment_ids
+from service.pipeline.sizes import LETTERS
+from service.pipeline.tryon import (
+    GIRTH_FIELDS,
+    InvalidField,
+    OutfitResult,
+    OutfitSpec,
+    check_garment_ids,
+    check_sizes,
+)
 
 REPO = Path(__file__).resolve().parents[1]
 JS_DIR = Path(__file__).parent / "js"
@@ -90,6 +99,10 @@ def fake_range(name: str, height_cm: float, weight_kg: float) -> tuple[float, fl
     return inwards(a * height_cm + b * weight_kg, c * height_cm + d * weight_kg)
 
 
+# The fake's garments with sizes: the T-shirt in the letters (``check_sizes`` reads only ``letters``).
+FAKE_SIZES = {"tshirt": types.SimpleNamespace(letters=LETTERS)}
+
+
 class FakeEngine:
     """An ``Engine`` over a small catalog: the catalog's rest meshes on a dummy body, in
     ``delay`` seconds. Bodies follow the real rules with made-up numbers: heights 135-210 cm, BMI
@@ -121,6 +134,7 @@ class FakeEngine:
 
     def validate(self, spec: OutfitSpec) -> None:
         check_garment_ids(spec.garments, self.garment_ids(), 4)
+        check_sizes(spec, FAKE_SIZES)
         self.body_report(spec)
 
     def body_report(self, spec: OutfitSpec) -> dict:

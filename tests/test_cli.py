@@ -11,8 +11,8 @@ from service.cli import main
 from service.process.paths import REPO_ROOT
 
 TABLE = """\
-id      name     category  layer rank  vertices  faces  openings
-tshirt  T-shirt  top       1           4         2      neck, waist
+id      name     category  layer rank  vertices  faces  openings     sizes
+tshirt  T-shirt  top       1           4         2      neck, waist  XS, S, M, L, XL, XXL
 pants   Pants    bottom    0           3         1      waist
 """
 
@@ -42,6 +42,7 @@ def test_garments_json_matches_http_body(models_env: Path, capsys: pytest.Captur
         "openings": ["neck", "waist"],
         "material": None,
         "origin": "bundled",
+        "sizes": ["XS", "S", "M", "L", "XL", "XXL"],
     }
 
 
@@ -92,6 +93,8 @@ def no_model_loading(monkeypatch: pytest.MonkeyPatch):
          "digits and _, starting with a letter)"),
         (["--garments", "cape"], "--garments: unknown id(s) ['cape']; allowed: "),
         (["--garments", "tshirt,tshirt"], "--garments: each id at most once, got ['tshirt', 'tshirt']"),
+        (["--garments", "pants,tshirt:XXXL"], "--garments: 'tshirt' has no size 'XXXL'; its sizes: XS, S, M, "
+         "L, XL, XXL"),
         (["--garments", "tshirt", "-o", "/nonexistent-dir/x.glb"], "-o /nonexistent-dir/x.glb: no such "
          "directory /nonexistent-dir"),
         (["--garments", "tshirt", "--gender", "1", "--height-cm", "134.9"], "--height-cm: height_cm=134.9 is "

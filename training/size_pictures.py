@@ -1,14 +1,15 @@
-"""Pictures of one style in several sizes simulated on one body, with their tension maps (issue 56):
+"""Pictures of one style in several sizes on one body, with their tension maps (issue 56):
 ``python -m training.size_pictures [--garment tshirt] [--sizes S,M,L,XL] [--body 0,178,80]``;
 ``--charts``: the chart bodies of every size instead (``docs/images/chart_bodies.png``).
 
 Each size is its rest shape (``training.garments.grading``: the style's pattern on the size's chart
-body, ``models/garments/size_charts.json``) draped on the shopper's body by the drape simulation
-(``training.drape.dataset.drape_garment`` with ``rest_body``), not the garment models. Beside each
-drape, its tension map: each triangle's largest principal strain against the size's rest shape
-(``service.pipeline.ease.principal_strain``), white where the cloth is at its rest length or shorter,
-through yellow to red at ``MAP_STRAIN`` stretched. Writes ``docs/images/sizes_<garment>.png`` and the
-drapes to ``build/size_drapes/`` (kept: a drape takes 30-120 s).
+body, ``models/garments/size_charts.json``). Per size, left to right: draped on the shopper's body by
+the drape simulation (``training.drape.dataset.drape_garment`` with ``rest_body``), its tension map,
+then what the service answers for ``{"id": garment, "size": letter}`` (explicit model, size model, fit
+and repair) and its tension map (``service.pipeline.tension``: each triangle's largest principal
+strain against the size's rest shape, white at rest or slack, through yellow to red at
+``MAP_STRAIN``). Writes ``docs/images/sizes_<garment>.png`` and the drapes to ``build/size_drapes/``
+(kept: a drape takes 30-120 s).
 """
 
 from __future__ import annotations
@@ -24,8 +25,8 @@ from service.pipeline.body_build import BodyRequest
 from service.pipeline.canonical import CanonicalSpace
 from service.pipeline.catalog import load_catalog
 from service.pipeline.dressed_body import dressed_vertices
-from service.pipeline.ease import principal_strain
-from service.pipeline.strain import RestShape
+from service.pipeline.tension import CutShapes, tension_colors
+from service.pipeline.tryon import ModelEngine, OutfitSpec
 from service.process.paths import REPO_ROOT, models_dir
 from training.drape.dataset import drape_garment
 from training.drape.solve import DrapeSettings
@@ -35,25 +36,11 @@ from training.garments.grading import (
     STYLE_RUNS,
     chart_builder,
     chart_vertices,
-    graded_rest,
 )
 from training.pictures import GARMENT_COLORS
 from training.render import PALETTE, MeshLayer, fit_camera, grid, render, render_views, save_png
 
-MAP_STRAIN = 0.15  # the tension map's full red: 15 % stretched
 DRAPES = REPO_ROOT / "build" / "size_drapes"
-
-
-RAMP = ((0.0, (0.95, 0.95, 0.95)), (0.33, (0.98, 0.85, 0.2)), (1.0, (0.8, 0.05, 0.05)))  # white, yellow, red
-
-
-def tension_colors(strain: np.ndarray) -> np.ndarray:
-    """``(F, 3)`` RGB of ``strain (F,)``: white at 0 or less, yellow at a third of ``MAP_STRAIN``, red
-    at it and more."""
-    t = np.clip(strain / MAP_STRAIN, 0.0, 1.0)
-    stops = np.array([s for s, _ in RAMP])
-    colors = np.array([c for _, c in RAMP])
-    return np.stack([np.interp(t, stops, colors[:, k]) for k in range(3)], axis=1)
 
 
 def drape_size(garment, body: np.ndarray, faces: np.ndarray, space, chart_body: np.ndarray, cache: Path):
@@ -103,25 +90,32 @@ def main(argv=None) -> None:
     run = STYLE_RUNS.get(args.garment, DEFAULT_RUN)
     skin = MeshLayer(body, model.faces, PALETTE["skin"])
     color = GARMENT_COLORS.get(args.garment, PALETTE["rose"])
+    engine = ModelEngine.load(models_dir(), threads=2)
+    cuts = CutShapes(engine.models)
     images, titles = [], []
     for letter in args.sizes.split(","):
         record = charts[f"{run}/{letter}"]
         chart_body = chart_vertices(builder, record)
         cache = DRAPES / f"{args.garment}_{letter}_{gender:g}_{height:g}_{weight:g}.npz"
-        world = drape_size(garment, body, model.faces, space, chart_body, cache)
-        rest = graded_rest(space, garment.vertices, chart_body)
-        strain = principal_strain(world, RestShape.build(rest, garment.faces))
-        layers = [skin, MeshLayer(world, garment.faces, color)]
-        camera = fit_camera(layers, "front")
-        tension = [skin, MeshLayer(world, garment.faces, color, face_colors=tension_colors(strain))]
-        images.append(np.concatenate([render(layers, "front", 420, camera=camera),
-                                      render(tension, "front", 420, camera=camera)], axis=1))  # fmt: skip
-        p95 = 100 * np.percentile(strain, 95)
+        drape = drape_size(garment, body, model.faces, space, chart_body, cache)
+        spec = OutfitSpec((args.garment,), gender, height, weight, sizes=(letter,), include_body=False)
+        served = engine.make(spec).layers[0].vertices
+        row, strains = [], []
+        for world in (drape, served):
+            stretch = cuts.stretch(args.garment, letter, built.vertices, world)
+            faces = np.asarray(garment.faces)
+            face_stretch = stretch[faces].mean(axis=1)
+            layers = [skin, MeshLayer(world, garment.faces, color)]
+            camera = fit_camera(layers, "front")
+            tension = [skin, MeshLayer(world, garment.faces, color, face_colors=tension_colors(face_stretch))]
+            row += [render(layers, "front", 360, camera=camera), render(tension, "front", 360, camera=camera)]
+            strains.append(100 * np.median(stretch))
+        images.append(np.concatenate(row, axis=1))
         girth = "hip" if garment.category == "bottom" else "chest"  # the girth its size is read by
         cut, worn = record["row"][f"{girth}_cm"], getattr(built.measured, f"{girth}_cm")
         titles.append(f"{args.garment} {letter} (cut for {girth} {cut:g} cm) on {girth} {worn:.0f} cm: "
-                      f"strain p95 {p95:.0f} %")
-    out = save_png(args.out / f"sizes_{args.garment}.png", grid(images, titles, columns=2))
+                      f"simulated (stretch p50 {strains[0]:.1f} %), served ({strains[1]:.1f} %)")
+    out = save_png(args.out / f"sizes_{args.garment}.png", grid(images, titles, columns=1))
     print(f"wrote {out}")
 
 

@@ -181,3 +181,14 @@ def signed_volume(vertices: np.ndarray, faces: np.ndarray) -> float:
     """Signed enclosed volume (positive for a closed, outward-oriented mesh)."""
     v = vertices[faces]
     return float(np.einsum("ij,ij->i", np.cross(v[:, 0], v[:, 1]), v[:, 2]).sum() / 6.0)
+
+
+def graph_laplacian(faces: np.ndarray, n_vertices: int):
+    """The uniform graph Laplacian ``(V, V)`` (scipy CSR: degree minus adjacency) of a triangle mesh."""
+    import scipy.sparse as sp
+
+    i = np.concatenate([faces[:, 0], faces[:, 1], faces[:, 2]])
+    j = np.concatenate([faces[:, 1], faces[:, 2], faces[:, 0]])
+    adjacency = sp.coo_matrix((np.ones(len(i)), (i, j)), shape=(n_vertices, n_vertices)).tocsr()
+    adjacency = ((adjacency + adjacency.T) > 0).astype(np.float64)
+    return (sp.diags(np.asarray(adjacency.sum(axis=1)).ravel()) - adjacency).tocsr()

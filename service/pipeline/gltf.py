@@ -62,6 +62,10 @@ class GltfLayer:
     display: DisplayMesh | None = None
     material: Material | None = None
     extras: dict | None = None
+    colors: np.ndarray | None = None
+    """``(V, 3)`` RGB in 0..1 per vertex (the tension map, ``service.pipeline.tension``): written as
+    COLOR_0 on the simulation mesh (the display mesh and textures left out) under a white material, in
+    the plain encoding only."""
 
 
 def _pad(data: bytes, fill: bytes = b"\0") -> bytes:
@@ -165,6 +169,11 @@ def outfit_glb(layers: Sequence[GltfLayer | tuple], compression: Compression = "
         f = np.asarray(layer.faces, dtype=np.int64)
         if v.ndim != 2 or v.shape[1] != 3 or not np.all(np.isfinite(v)):
             raise ValueError(f"layer {name!r}: vertices must be finite (V, 3)")
+        colors = None if layer.colors is None else np.asarray(layer.colors, dtype=np.float32)
+        if colors is not None:
+            if colors.shape != v.shape or compression != "none":
+                raise ValueError(f"layer {name!r}: colors must be (V, 3), in the plain encoding only")
+            layer = GltfLayer(name, v, f, extras=layer.extras)
         if layer.display is not None:
             layer.display.check(len(v), f)
         normals = (vertex_normals(v, f) @ ANNY_TO_GLTF.T).astype(np.float32)
@@ -183,6 +192,8 @@ def outfit_glb(layers: Sequence[GltfLayer | tuple], compression: Compression = "
             }
             if uv is not None:
                 attributes["TEXCOORD_0"] = out.add(uv.astype(np.float32), 34962, 5126, "VEC2", False)
+            if colors is not None:
+                attributes["COLOR_0"] = out.add(colors, 34962, 5126, "VEC3", False)
             idx = out.add(np.asarray(faces).astype(np.uint32).reshape(-1), 34963, 5125, "SCALAR", False)
         else:
             textured = layer.material is not None and bool(layer.material.textures)
@@ -196,7 +207,10 @@ def outfit_glb(layers: Sequence[GltfLayer | tuple], compression: Compression = "
                 uv_transform = {TEXTURE_TRANSFORM: gltf_compact.texture_transform(compact.uv)}
                 transformed = True
         textures = texture if layer.display is not None else None
-        gltf["materials"].append(_material(name, layer.material, textures, uv_transform))
+        material = _material(name, layer.material, textures, uv_transform)
+        if colors is not None:  # COLOR_0 multiplies the base colour: white shows the map as it is
+            material["pbrMetallicRoughness"]["baseColorFactor"] = [1.0, 1.0, 1.0, 1.0]
+        gltf["materials"].append(material)
         primitive = {"attributes": attributes, "indices": idx, "material": i, "mode": 4}
         gltf["meshes"].append({"name": name, "primitives": [primitive]})
         gltf["nodes"].append(node)

@@ -7,7 +7,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal
 
@@ -25,6 +25,7 @@ from service.pipeline.collisions.layering import Refusal
 from service.pipeline.explicit import ExplicitModel, ExplicitOnnx
 from service.pipeline.fields import FieldSet
 from service.pipeline.girth_priors import GirthPriors
+from service.pipeline.size_model import SizeModel
 from service.pipeline.untangle import untangle_with_jacobian
 from service.pipeline.untangle_onnx import NeuralUntangler
 
@@ -44,6 +45,7 @@ class LoadedModels:
     body_sdf: SdfGrid | None = None
     priors: GirthPriors | None = None  # None: the bundled models' (``GirthPriors.load()``)
     body_table: BodyTable | None = None  # None: every body fitted (``body_build``)
+    sizes: dict[str, SizeModel] = field(default_factory=dict)  # the garments worn in sizes (issue 56)
 
     @classmethod
     def load(cls, directory: Path | None = None, threads: int = 2, imported: list[Path] = ()) -> LoadedModels:
@@ -74,6 +76,7 @@ class LoadedModels:
             SdfGrid.load(sdf) if (sdf := directory / "body" / "mean_sdf.npz").exists() else None,
             GirthPriors.load(p) if (p := directory / "body" / "girth_priors.json").exists() else None,
             BodyTable.load(t) if (t := directory / "body" / TABLE_NAME).exists() else None,
+            {gid: m for gid in catalog if (m := SizeModel.load(gid, directory / "explicit")) is not None},
         )  # fmt: skip
 
 
@@ -104,6 +107,10 @@ class OutfitModels:
     @property
     def explicit(self) -> dict[str, ExplicitModel | ExplicitOnnx]:
         return self.loaded.explicit
+
+    @property
+    def sizes(self) -> dict[str, SizeModel]:
+        return self.loaded.sizes
 
     @property
     def fields(self) -> FieldSet:

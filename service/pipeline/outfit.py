@@ -78,10 +78,12 @@ def make_outfit(
     collisions: CollisionSettings = SETTINGS,
     body_vertices: np.ndarray | None = None,
     started: float | None = None,
+    deltas: dict[str, np.ndarray] | None = None,
 ) -> Outfit:
     """Dress the body of shape ``beta (3,)`` in ``garment_ids`` (inner to outer); ``body_vertices (V, 3)``,
     when given, is the body instead (a shopper's own, ``body_build``), ``beta`` the code its garments
-    take.
+    take. ``deltas``: the garments worn in a size, each the size's delta ``(2,)`` on this body
+    (``service.pipeline.size_model``); the others are the one-size garment cut to the body.
 
     With ``untangle_layers``: the field fit, then (``repair``) the exact repair of
     ``service.pipeline.collisions.repair``.
@@ -95,8 +97,15 @@ def make_outfit(
     t0 = time.perf_counter()
     # Each garment's explicit model and body clearance on its own thread (onnxruntime and the kernels
     # release the GIL); the same meshes as one after the other.
-    unshifted = list(pool("fit", FIT_THREADS).map(
-        lambda g: models.clearance.clear_of_body(models.explicit[g].canonical(beta)), garment_ids))
+    deltas = deltas or {}
+
+    def explicit_mesh(g: str) -> np.ndarray:
+        x = models.explicit[g].canonical(beta)
+        if g in deltas:
+            x = models.sizes[g].canonical(x, beta, deltas[g])
+        return models.clearance.clear_of_body(x)
+
+    unshifted = list(pool("fit", FIT_THREADS).map(explicit_mesh, garment_ids))
     faces = [models.catalog[g].faces for g in garment_ids]
     seconds["explicit"] = time.perf_counter() - t0
     # Where a garment was let down around an inner one and the repair still left crossings, the outfit

@@ -45,7 +45,9 @@ class InvalidField(ValueError):
 
 @dataclass(frozen=True)
 class OutfitSpec:
-    """A request in canonical form: garments inner to outer, body in human units, options."""
+    """A request in canonical form: garments inner to outer, body in human units, options. ``sizes``:
+    the size each garment is worn in, parallel to ``garments`` (None: the one-size garment cut to the
+    body, ``service.pipeline.size_model``); empty when none is named."""
 
     garments: tuple[str, ...]
     gender: float = 0.0
@@ -58,12 +60,32 @@ class OutfitSpec:
     include_body: bool = True
     measure: bool = False
     untangler: UntanglerKind = "neural"
+    sizes: tuple[str | None, ...] = ()
+    tension: bool = False
+
+    def __post_init__(self):
+        if not any(self.sizes):  # one form for "no size named": the same outfit, the same id
+            object.__setattr__(self, "sizes", ())
+        elif len(self.sizes) != len(self.garments):
+            raise ValueError(f"sizes: {len(self.sizes)} for {len(self.garments)} garments")
+
+    def size_of(self, k: int) -> str | None:
+        """The size garment ``k`` is worn in (None: one size)."""
+        return self.sizes[k] if self.sizes else None
 
     def canonical_json(self) -> str:
-        """Stable text of the request: same outfit, same text (floats by ``repr``, keys sorted)."""
+        """Stable text of the request: same outfit, same text (floats by ``repr``, keys sorted; ``sizes``
+        only where one is named, so that the outfits before sizes keep their ids)."""
         fields = asdict(self) | {k: float(getattr(self, k)) for k in ("gender", "height_cm", "weight_kg")}
         fields |= {k: None if getattr(self, k) is None else float(getattr(self, k)) for k in GIRTH_FIELDS}
-        return json.dumps(fields | {"garments": list(self.garments)}, sort_keys=True, separators=(",", ":"))
+        fields["garments"] = list(self.garments)
+        if self.sizes:
+            fields["sizes"] = list(self.sizes)
+        else:
+            del fields["sizes"]
+        if not self.tension:
+            del fields["tension"]
+        return json.dumps(fields, sort_keys=True, separators=(",", ":"))
 
     def outfit_id(self, model_version: str) -> str:
         """32 hex chars naming this outfit on these models (a new model version gives new ids)."""
@@ -149,6 +171,22 @@ def check_garment_ids(
         raise InvalidField(field, f"repeated id(s) {repeated}", listing)
 
 
+def check_sizes(spec: OutfitSpec, sized: dict, field: str = "garments") -> None:
+    """Raise ``InvalidField(f"{field}.k.size", ...)`` for a size garment k does not come in; ``sized``:
+    garment id -> its ``SizeModel`` (the garments with sizes)."""
+    for k, gid in enumerate(spec.garments):
+        if (size := spec.size_of(k)) is None:
+            continue
+        model = sized.get(gid)
+        if model is None:
+            with_sizes = ", ".join(sorted(sized)) or "none"
+            raise InvalidField(f"{field}.{k}.size", f"{gid!r} comes in one size",
+                               f"no size for {gid!r} (garments with sizes: {with_sizes})")  # fmt: skip
+        if size not in model.letters:
+            allowed = f"one of {', '.join(model.letters)}, or none (one size cut to the body)"
+            raise InvalidField(f"{field}.{k}.size", f"{gid!r} has no size {size!r}", allowed)
+
+
 UNDER_RULE = "garment ids worn under the style, inner first, other than the style (GET /v1/garments)"
 
 
@@ -178,17 +216,19 @@ def model_version(models_dir: Path) -> str:
 
 
 def glb_layers(
-    garments, catalog: dict, body: tuple[np.ndarray, np.ndarray] | None, extras: dict | None = None
-):
+    garments, catalog: dict, body: tuple[np.ndarray, np.ndarray] | None, extras: dict | None = None,
+    sizes: dict[str, str | None] | None = None,
+):  # fmt: skip
     """``GltfLayer``s of fitted ``garments`` [(id, vertices (V, 3), faces (F, 3))], each with its catalog
-    look (display mesh and material, when it has one), the body's (vertices, faces) first unless None,
-    with ``extras`` on its node."""
+    look (display mesh and material, when it has one) and, worn in a size (``sizes``), ``{"size"}`` as
+    its node's extras; the body's (vertices, faces) first unless None, with ``extras`` on its node."""
     from service.pipeline.gltf import GltfLayer
 
     layers = [GltfLayer("body", *body, extras=extras)] if body is not None else []
     for gid, v, f in garments:
-        g = catalog.get(gid)
-        layers.append(GltfLayer(gid, v, f, g.display if g else None, g.material if g else None))
+        g, size = catalog.get(gid), (sizes or {}).get(gid)
+        look = (g.display, g.material) if g else (None, None)
+        layers.append(GltfLayer(gid, v, f, *look, extras=None if size is None else {"size": size}))
     return layers
 
 
@@ -208,6 +248,17 @@ def finite_layers(
         if alt is not None and np.all(np.isfinite(alt)):
             out.append((gid, alt, f))
     return out, flagged
+
+
+def worn_deltas(spec: OutfitSpec, sized: dict, measured) -> dict[str, np.ndarray]:
+    """Each sized garment's delta ``(2,)`` on the body ``measured`` (``BodyMeasurements``)."""
+    out = {}
+    for k, gid in enumerate(spec.garments):
+        if (size := spec.size_of(k)) is not None:
+            model = sized[gid]
+            wearer = np.array([getattr(measured, f"{model.primary}_cm"), measured.height_cm])
+            out[gid] = model.delta(size, wearer)
+    return out
 
 
 def _refused_as_invalid(build):
@@ -240,6 +291,7 @@ class ModelEngine:
         self.model_version = version
         self._dressed = lru_cache(maxsize=BODY_CACHE)(self._dressed_vertices)
         self._fitter = None
+        self._cuts = None  # the tension map's rest shapes (service.pipeline.tension.CutShapes), made on use
 
     @classmethod
     def load(cls, models_dir: Path, threads: int, imported: list[Path] = ()) -> ModelEngine:
@@ -263,6 +315,7 @@ class ModelEngine:
 
         check_garment_ids(spec.garments, self.garment_ids(), MAX_GARMENTS)
         check_order(self.models.refusals(list(spec.garments)))
+        check_sizes(spec, self.models.sizes)
         self.body(spec)
 
     def body(self, spec: OutfitSpec):
@@ -327,15 +380,16 @@ class ModelEngine:
         built = self.body(spec)
         beta, body_vertices = built.garment_beta, self.dressed(spec)
         ids = list(spec.garments)
+        deltas = worn_deltas(spec, self.models.sizes, built.measured)
 
         def explicit_outfit():
             return make_outfit(self.models, ids, beta, untangle_layers=False, measure=False,
-                               body_vertices=body_vertices)
+                               body_vertices=body_vertices, deltas=deltas)
 
         flagged: list[str] = []
         try:
             outfit = make_outfit(self.models, ids, beta, spec.untangle, spec.untangler, measure=spec.measure,
-                                 body_vertices=body_vertices, started=started)
+                                 body_vertices=body_vertices, started=started, deltas=deltas)
         except NUMERICAL_ERRORS as e:
             if not spec.untangle:
                 raise
@@ -348,11 +402,34 @@ class ModelEngine:
             flagged += bad
         body = (outfit.body_vertices, outfit.body_faces) if spec.include_body else None
         body_report = self.body_report(built)
-        layers = glb_layers(garments, self.models.catalog, body, {"body": body_report})
+        worn = {g: spec.size_of(k) for k, g in enumerate(spec.garments)}
+        layers = glb_layers(garments, self.models.catalog, body, {"body": body_report}, worn)
         report = dict(outfit.report) | {"body": body_report}
+        if spec.tension:
+            report["tension"] = self._tension(layers, worn, built.vertices)
         report["numerical_fallback"] = flagged
         report["garments_served"] = [g for g, _, _ in garments]
+        report["sizes"] = worn
         return OutfitResult(outfit_glb(layers), report, layers)
+
+
+    def _tension(self, layers: list, worn: dict, wearer: np.ndarray) -> dict:
+        """Colour each garment layer of ``layers`` by its strain (``service.pipeline.tension``), in place;
+        returns the report's ``tension``."""
+        from dataclasses import replace
+
+        from service.pipeline.tension import CutShapes, strain_summary, tension_colors
+
+        if self._cuts is None:
+            self._cuts = CutShapes(self.models)
+        out = {}
+        for k, layer in enumerate(layers):
+            if layer.name not in worn:
+                continue
+            stretch = self._cuts.stretch(layer.name, worn[layer.name], wearer, layer.vertices)
+            layers[k] = replace(layer, colors=tension_colors(stretch))
+            out[layer.name] = strain_summary(stretch)
+        return out
 
 
 def self_test(engine: Engine, garments: list[str], untangle: bool) -> OutfitResult:

@@ -57,11 +57,42 @@ def allowed_for(url_path: str) -> dict[str, str]:
     return ALLOWED | FIT_ALLOWED if url_path.startswith("/v1/fit") else ALLOWED
 
 
+# pydantic's names of the two forms of a ``garments`` item (an id, or ``SizedGarment``) in an error's loc
+ITEM_FORMS = {"constrained-str": str, "SizedGarment": dict}
+
+
+def _item_errors(errors: list[dict]) -> list[dict]:
+    """``errors`` with each ``garments`` item judged by the form it was given in: a string's errors as an
+    id, an object's as a ``SizedGarment`` (pydantic reports a bad item against both forms); the form
+    named in the loc dropped. An item that is neither keeps one error."""
+    out, seen = [], set()
+    for e in errors:
+        loc = tuple(e.get("loc", ()))
+        forms = [i for i, p in enumerate(loc) if p in ITEM_FORMS]
+        if not forms:
+            out.append(e)
+            continue
+        i = forms[0]
+        item = e.get("input") if len(loc) == i + 1 else None
+        given = type(item) if item is not None else ITEM_FORMS[loc[i]]
+        wrong_form = e.get("type") in ("string_type", "model_type") and len(loc) == i + 1
+        if wrong_form and isinstance(item, (str, dict)) and not isinstance(item, ITEM_FORMS[loc[i]]):
+            continue
+        if wrong_form and given not in (str, dict):
+            if loc[:i] in seen:
+                continue
+            seen.add(loc[:i])
+            e = e | {"type": "garment_item", "msg": "Input should be a garment id or an object with `id` "
+                     "and `size`"}  # fmt: skip
+        out.append(e | {"loc": loc[:i] + loc[i + 1 :]})
+    return out
+
+
 def field_errors(errors: list[dict], garment_ids: list[str], allowed: dict[str, str] = ALLOWED) -> list[dict]:
     """pydantic/FastAPI error dicts -> ``[{"field", "message", "allowed"}]``, ``allowed`` as the route
     takes it (``allowed_for``)."""
     out = []
-    for e in errors:
+    for e in _item_errors(errors):
         path = _field_path(tuple(e.get("loc", ())))
         kind = e.get("type", "")
         if kind == "extra_forbidden":
@@ -76,7 +107,8 @@ def field_errors(errors: list[dict], garment_ids: list[str], allowed: dict[str, 
             message = outfit_url.message(e)
         extra = kind == "extra_forbidden"
         accepts = _allowed(path, extra, allowed)
-        if path.startswith(("garments", "under", "style")) and garment_ids and not extra:  # ids it lacks
+        names_id = path.startswith(("garments", "under", "style")) and not path.endswith(".size")
+        if names_id and garment_ids and not extra:  # the ids it lacks
             accepts += ": " + ", ".join(garment_ids)
         out.append({"field": path or "(request body)", "message": message, "allowed": accepts})
     return out

@@ -13,8 +13,9 @@ let a viewer that cannot send ``Authorization`` (``<model-viewer src=...>``) fet
 request counts against key ``k``'s rate limit (``service.server.access``).
 
 Query parameters: the POST's fields by their last name (``height_cm``, not ``body.height_cm``);
-``garments`` comma-separated, booleans ``true``/``false``. Defaults are left out of the URLs made here,
-and so are the girths not given (``chest_cm``, ``waist_cm``, ``hip_cm``: predicted).
+``garments`` comma-separated, each ``id`` or ``id:SIZE`` (``tshirt:L``), booleans ``true``/``false``.
+Defaults are left out of the URLs made here, and so are the girths not given (``chest_cm``,
+``waist_cm``, ``hip_cm``: predicted).
 
 A body alone (POST /v1/bodies) has the same kind of URL, ``/v1/bodies.glb?height_cm=165&...&v=VER``
 (``BODIES``): the body's fields and ``compression`` only. Its signature covers the same canonical text,
@@ -45,9 +46,10 @@ FIELDS = {
     "include_body": "options.include_body",
     "untangler": "options.untangler",
     "compression": "options.compression",
+    "tension": "options.tension",
 }
 NUMBERS = set(BODY_NUMBERS)
-BOOLEANS = {"untangle", "include_body"}
+BOOLEANS = {"untangle", "include_body", "tension"}
 EXTRA = ("v", "k", "sig")  # model version, API key id, signature
 OPTION_DEFAULTS = OutfitOptions()
 
@@ -108,8 +110,9 @@ def body_query(spec: OutfitSpec, compression: str, version: str) -> list[tuple[s
 
 def glb_query(spec: OutfitSpec, compression: str, version: str) -> list[tuple[str, str]]:
     """Canonical query of ``spec`` (defaults left out), without key id and signature."""
-    items = [("garments", ",".join(spec.garments)), *_body_items(spec)]
-    for name in ("untangle", "include_body"):
+    garments = [g if (s := spec.size_of(k)) is None else f"{g}:{s}" for k, g in enumerate(spec.garments)]
+    items = [("garments", ",".join(garments)), *_body_items(spec)]
+    for name in ("untangle", "include_body", "tension"):
         if getattr(spec, name) != getattr(OPTION_DEFAULTS, name):
             items.append((name, "true" if getattr(spec, name) else "false"))
     if spec.untangler != OPTION_DEFAULTS.untangler:
@@ -133,18 +136,24 @@ def glb_url(spec: OutfitSpec, compression: str, version: str, key_id: str | None
     items = (body_query if kind is BODIES else glb_query)(spec, compression, version)
     if key_id is not None and secret is not None:
         items += [("k", key_id), ("sig", signature(secret, key_id, spec, compression, version))]
-    return f"{kind.path}?{urlencode(items, safe=',')}"
+    return f"{kind.path}?{urlencode(items, safe=',:')}"
 
 
 def _error(name: str, message: str, kind: str = "value_error") -> dict:
     return {"loc": ("query", name), "type": kind, "msg": message}
 
 
+def _garment_item(text: str):
+    """``id`` -> the id, ``id:SIZE`` -> ``{"id", "size"}``, as the POST's ``garments`` items."""
+    gid, colon, size = text.partition(":")
+    return {"id": gid, "size": size} if colon else gid
+
+
 def _value(name: str, text: str):
     """Query text -> the JSON value the POST would carry. Text that is no number (or no boolean) is
     passed on as text, so the POST's strict validation refuses it with the POST's message."""
     if name == "garments":
-        return text.split(",") if text else []
+        return [_garment_item(t) for t in text.split(",")] if text else []
     if name in NUMBERS:
         try:
             return float(text)

@@ -12,12 +12,13 @@ from __future__ import annotations
 import math
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, StringConstraints, field_validator
+from pydantic import BaseModel, ConfigDict, Field, StringConstraints, ValidationInfo, field_validator
 
 from service.pipeline.body_build import BMI_RANGE, HEIGHT_RANGE_CM, weight_range_kg
 from service.pipeline.catalog import Category
 from service.pipeline.gltf import Compression
 from service.pipeline.outfit import MAX_GARMENTS
+from service.pipeline.sizes import LETTERS
 from service.pipeline.tryon import GARMENT_ID, GIRTH_FIELDS, OutfitSpec
 
 GarmentId = Annotated[str, StringConstraints(pattern=f"^{GARMENT_ID}$")]
@@ -33,7 +34,11 @@ BODY_QUERY = "`gender`, `height_cm`, `weight_kg`, `chest_cm`, `waist_cm`, `hip_c
 # What each request field accepts, quoted in every 4xx about it.
 ALLOWED = {
     "": "a JSON object with `garments` (required), `body` and `options`",
-    "garments": f"a list of 1-{MAX_GARMENTS} distinct garment ids, inner to outer (GET /v1/garments)",
+    "garments": f"a list of 1-{MAX_GARMENTS} distinct garments, inner to outer, each a garment id or "
+    "`{\"id\": ..., \"size\": ...}` (GET /v1/garments lists the ids and each one's sizes)",
+    "garments.id": "a garment id (GET /v1/garments)",
+    "garments.size": f"one of {', '.join(LETTERS)} where the garment comes in sizes (GET /v1/garments), or "
+    "null: the one-size garment cut to the body",
     "body": "an object with `gender`, `height_cm`, `weight_kg` and, each optional, `chest_cm`, `waist_cm`, "
     "`hip_cm`",
     "body.gender": "a number from 0 (male) to 1 (female)",
@@ -41,13 +46,15 @@ ALLOWED = {
     "body.weight_kg": f"a number from {WEIGHT_KG[0]:g} to {WEIGHT_KG[1]:g}; the exact range depends on "
     f"height (BMI {BMI_RANGE[0]:g}-{BMI_RANGE[1]:g})",
     **{f"body.{name}": GIRTH_ALLOWED for name in GIRTH_FIELDS},
-    "options": "an object with `untangle`, `include_body`, `measure`, `untangler`, `compression`",
+    "options": "an object with `untangle`, `include_body`, `measure`, `untangler`, `compression`, `tension`",
+    "options.tension": "true or false; true only with `compression` `none`",
     "options.untangle": "true or false",
     "options.include_body": "true or false",
     "options.measure": "true or false",
     "options.untangler": "`neural` or `reference`",
-    "query": f"the POST's fields as query parameters (`garments` comma-separated, {BODY_QUERY}, "
-    "`untangle`, `include_body`, `untangler`, `compression`), and `v`, `k`, `sig` as made by POST "
+    "query": f"the POST's fields as query parameters (`garments` comma-separated, each `id` or `id:SIZE`, "
+    f"{BODY_QUERY}, "
+    "`untangle`, `include_body`, `untangler`, `compression`, `tension`), and `v`, `k`, `sig` as made by POST "
     "/v1/outfits",
     "options.compression": "`none` (plain glTF), `quantized` (KHR_mesh_quantization) or `meshopt` "
     "(EXT_meshopt_compression)",
@@ -140,6 +147,40 @@ class OutfitOptions(BaseModel):
         "int16 positions, int8 normals) or `meshopt` (EXT_meshopt_compression on top; the viewer needs "
         "meshopt's decoder). Not part of the outfit id: every encoding is the same outfit.",
     )
+    tension: bool = Field(
+        default=False,
+        description="Colour each garment by how far its fabric is stretched beyond its cut (COLOR_0 under a "
+        "white material, textures left out; white at rest or slack, yellow, red at 5 % stretched: "
+        "docs/fit.md) and add `tension` to the report. Plain encoding only (`compression` `none`).",
+    )
+
+    @field_validator("tension")
+    @classmethod
+    def _tension_is_plain(cls, tension: bool, info: ValidationInfo) -> bool:
+        compression = info.data.get("compression", "none")
+        if tension and compression != "none":
+            raise ValueError(f"the tension map is in the plain encoding only (compression {compression!r})")
+        return tension
+
+
+class SizedGarment(BaseModel):
+    """A garment worn in one of its sizes (docs/fit.md)."""
+
+    model_config = CLOSED
+
+    id: GarmentId = Field(description="Garment id (GET /v1/garments).")
+    size: Literal[LETTERS] | None = Field(  # type: ignore[valid-type]
+        default=None,
+        description="The size worn, one of the garment's `sizes` (GET /v1/garments): its cut is that size's "
+        "pattern, tight on a body bigger than its chart and loose on a smaller one. null: the one-size "
+        "garment cut to the body, as a bare id.",
+    )
+
+
+def garment_items(items: list) -> tuple[tuple[str, ...], tuple[str | None, ...]]:
+    """(ids, sizes) of the request's ``garments`` items: ids and ``SizedGarment``s."""
+    ids = tuple(g if isinstance(g, str) else g.id for g in items)
+    return ids, tuple(None if isinstance(g, str) else g.size for g in items)
 
 
 class OutfitRequest(BaseModel):
@@ -149,7 +190,7 @@ class OutfitRequest(BaseModel):
         json_schema_extra={
             "examples": [
                 {
-                    "garments": ["pants", "tshirt", "jacket"],
+                    "garments": ["pants", {"id": "tshirt", "size": "M"}, "jacket"],
                     "body": {"gender": 0.0, "height_cm": 180, "weight_kg": 80},
                     "options": {"untangle": True, "include_body": True},
                 }
@@ -157,25 +198,29 @@ class OutfitRequest(BaseModel):
         },
     )
 
-    garments: list[GarmentId] = Field(
+    garments: list[GarmentId | SizedGarment] = Field(
         min_length=1,
         max_length=MAX_GARMENTS,
-        description="Garment ids, inner to outer, each at most once. An order no cloth can take (pants "
-        "over a skirt) is refused with a 422 on `garments` that names the garments and why "
-        "(docs/collisions.md, 'Refused orders').",
+        description="Garments, inner to outer, each at most once: a garment id (the one-size garment cut to "
+        "the body) or `{\"id\": ..., \"size\": \"M\"}` (that size's cut). An order no cloth can take "
+        "(pants over a skirt) is refused with a 422 on `garments` that names the garments and why "
+        "(docs/collisions.md, 'Refused orders'); a size the garment does not come in, with a 422 on "
+        "`garments.K.size` naming the sizes it has.",
     )
     body: BodyShape = Field(default_factory=BodyShape)
     options: OutfitOptions = Field(default_factory=OutfitOptions)
 
     @field_validator("garments")
     @classmethod
-    def _distinct(cls, ids: list[str]) -> list[str]:
-        return distinct_ids(ids)
+    def _distinct(cls, items: list) -> list:
+        distinct_ids(list(garment_items(items)[0]))
+        return items
 
     def spec(self) -> OutfitSpec:
         o = self.options
-        return self.body.spec(tuple(self.garments), untangle=o.untangle, include_body=o.include_body,
-                              measure=o.measure, untangler=o.untangler)  # fmt: skip
+        ids, sizes = garment_items(self.garments)
+        return self.body.spec(ids, untangle=o.untangle, include_body=o.include_body, measure=o.measure,
+                              untangler=o.untangler, sizes=sizes, tension=o.tension)  # fmt: skip
 
 
 BODY_EXAMPLE = {"height_cm": 165.0, "weight_kg": 60.0, "chest_cm": 87.9, "waist_cm": 68.7, "hip_cm": 100.0,
@@ -377,6 +422,7 @@ class GarmentSummary(BaseModel):
                 "vertices": 5210,
                 "faces": 10128,
                 "openings": ["hem", "neck", "sleeve_l", "sleeve_r"],
+                "sizes": list(LETTERS),
                 "material": {
                     "base_color": [1.0, 1.0, 1.0, 1.0],
                     "roughness": 0.9,
@@ -402,6 +448,11 @@ class GarmentSummary(BaseModel):
     )
     material: GarmentMaterial | None = Field(
         default=None, description="How it looks in the GLB (UVs and textures); null: a flat colour."
+    )
+    sizes: list[str] = Field(
+        default_factory=list,
+        description="The sizes it comes in, smallest first (`{\"id\": ..., \"size\": ...}` in an outfit, "
+        "`style` in POST /v1/fit); empty: one size, cut to the body.",
     )
 
 

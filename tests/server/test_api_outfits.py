@@ -110,7 +110,10 @@ def test_evicted_outfit_is_404_by_id_and_made_again_by_url(fake_models_dir: Path
         assert engine["it"].calls == 3
 
 
-ALLOWED_GARMENTS = "a list of 1-4 distinct garment ids, inner to outer (GET /v1/garments): tshirt, pants"
+ALLOWED_GARMENTS = ("a list of 1-4 distinct garments, inner to outer, each a garment id or `{\"id\": ..., "
+                    "\"size\": ...}` (GET /v1/garments lists the ids and each one's sizes): tshirt, pants")
+ALLOWED_SIZE = ("one of XS, S, M, L, XL, XXL where the garment comes in sizes (GET /v1/garments), or null: "
+                "the one-size garment cut to the body")  # fmt: skip
 ALLOWED_REQUEST = "a JSON object with `garments` (required), `body` and `options`"
 ID_RULE = "ids are 1-32 lower case letters, digits and _, starting with a letter"
 ALLOWED_WEIGHT = "a number from 23.6 to 308.7; the exact range depends on height (BMI 13-70)"
@@ -128,7 +131,22 @@ BAD_INPUT = [
      ALLOWED_GARMENTS),
     ({"garments": ["tshirt", "tshirt"]}, "garments", "repeated id(s) ['tshirt']",
      ALLOWED_GARMENTS),
-    ({"garments": [3]}, "garments.0", "Input should be a valid string", ALLOWED_GARMENTS),
+    ({"garments": [3]}, "garments.0", "Input should be a garment id or an object with `id` and `size`",
+     ALLOWED_GARMENTS),
+    ({"garments": [{"id": "tshirt", "size": "XXXL"}]}, "garments.0.size",
+     "Input should be 'XS', 'S', 'M', 'L', 'XL' or 'XXL'", ALLOWED_SIZE),
+    ({"garments": ["pants", {"id": "tshirt", "size": "m"}]}, "garments.1.size",
+     "Input should be 'XS', 'S', 'M', 'L', 'XL' or 'XXL'", ALLOWED_SIZE),
+    ({"garments": [{"id": "pants", "size": "M"}]}, "garments.0.size", "'pants' comes in one size",
+     "no size for 'pants' (garments with sizes: tshirt)"),
+    ({"garments": [{"size": "M"}]}, "garments.0.id", "Field required",
+     "a garment id (GET /v1/garments): tshirt, pants"),
+    ({"garments": [{"id": "tshirt", "size": "M", "fit": "slim"}]}, "garments.0.fit", "unknown field",
+     ALLOWED_GARMENTS.removesuffix(": tshirt, pants")),
+    ({"garments": [{"id": "T!", "size": "M"}]}, "garments.0.id", f"unknown garment id 'T!' ({ID_RULE})",
+     "a garment id (GET /v1/garments): tshirt, pants"),
+    ({"garments": ["tshirt", {"id": "tshirt", "size": "M"}]}, "garments", "repeated id(s) ['tshirt']",
+     ALLOWED_GARMENTS),
     ({"garments": "tshirt"}, "garments", "Input should be a valid list", ALLOWED_GARMENTS),
     ({"garments": ["T-Shirt!"]}, "garments.0", f"unknown garment id 'T-Shirt!' ({ID_RULE})",
      ALLOWED_GARMENTS),

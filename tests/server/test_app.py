@@ -26,6 +26,7 @@ TSHIRT = {
     "openings": ["neck", "waist"],
     "material": None,
     "origin": "bundled",
+    "sizes": ["XS", "S", "M", "L", "XL", "XXL"],
 }
 PANTS = {
     "id": "pants",
@@ -37,6 +38,7 @@ PANTS = {
     "openings": ["waist"],
     "material": None,
     "origin": "bundled",
+    "sizes": [],
 }
 
 

@@ -56,6 +56,30 @@ def test_girths_round_trip_when_given_and_are_absent_otherwise():
     assert back.outfit_id("v1") != OutfitSpec(("tshirt",), 1.0, 165.0, 60.0).outfit_id("v1")
 
 
+def test_sizes_round_trip_and_a_size_is_another_outfit():
+    spec = OutfitSpec(("pants", "tshirt"), 0.0, 180.0, 80.0, sizes=(None, "L"))
+    url = glb_url(spec, "none", "v1")
+    assert url == "/v1/outfits.glb?garments=pants,tshirt:L&gender=0&height_cm=180&weight_kg=80&v=v1"
+    back = parse_query(parse_qsl(urlsplit(url).query)).request.spec()
+    assert back == spec and back.size_of(1) == "L" and back.size_of(0) is None
+    bare = OutfitSpec(("pants", "tshirt"), 0.0, 180.0, 80.0)
+    # no size named is one outfit however it is said, and the ids of the outfits before sizes stay
+    assert OutfitSpec(("pants", "tshirt"), 0.0, 180.0, 80.0, sizes=(None, None)) == bare
+    assert "sizes" not in bare.canonical_json()
+    assert back.outfit_id("v1") != bare.outfit_id("v1")
+    assert spec.outfit_id("v1") != OutfitSpec(
+        ("pants", "tshirt"), 0.0, 180.0, 80.0, sizes=(None, "M")
+    ).outfit_id("v1")
+
+
+def test_a_sized_post_and_its_url_are_one_outfit(app_and_engine):
+    client, engine = app_and_engine
+    posted = client.post("/v1/outfits", json={"garments": ["pants", {"id": "tshirt", "size": "S"}]}).json()
+    assert "garments=pants,tshirt:S&" in posted["glb_url"]
+    assert client.get(posted["glb_url"]).headers["x-outfit-id"] == posted["id"]
+    assert engine["it"].calls == 1
+
+
 def test_a_url_with_girths_makes_the_posts_outfit(app_and_engine):
     client, engine = app_and_engine
     request = {"garments": ["tshirt"], "body": {"gender": 1, "height_cm": 165, "weight_kg": 60, "hip_cm": 95}}
@@ -108,6 +132,16 @@ def test_measures_do_not_change_the_url_nor_make_the_outfit_again(app_and_engine
     assert client.get(measured["glb_url"]).status_code == 200 and engine["it"].calls == 1
 
 
+def query_item(item) -> str | None:
+    """A ``garments`` item as the URL spells it (``id`` or ``id:SIZE``), or None where it cannot."""
+    if isinstance(item, str):
+        return item
+    strings = isinstance(item, dict) and all(isinstance(v, str) for v in item.values())
+    if strings and set(item) == {"id", "size"}:
+        return f"{item['id']}:{item['size']}"
+    return None
+
+
 def as_query(body) -> list[tuple[str, str]] | None:
     """A POST body as GLB URL parameters, or None where a query cannot say the same thing (a number
     given as text, a non-list of garments, a field the URL does not have)."""
@@ -115,9 +149,9 @@ def as_query(body) -> list[tuple[str, str]] | None:
         return None
     items = []
     if "garments" in body:
-        if not isinstance(body["garments"], list) or not all(isinstance(g, str) for g in body["garments"]):
+        if not isinstance(body["garments"], list) or not all(map(query_item, body["garments"])):
             return None
-        items.append(("garments", ",".join(body["garments"])))
+        items.append(("garments", ",".join(map(query_item, body["garments"]))))
     for name, value in body.get("body", {}).items():
         if name not in ("gender", "height_cm", "weight_kg", *GIRTH_FIELDS) or type(value) not in (int, float):
             return None

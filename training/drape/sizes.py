@@ -1,5 +1,5 @@
 """Drapes of each body in the sizes around its own (issue 56): the data the garment models need to
-take a size. ``python -m training.drape.sizes [--train N] [--test N] [--garments ids] [--workers W]``.
+take a size. ``python -m training.drape.sizes [--train N] [--test N] [--garments ids] [--shard K/N]``.
 
 Layout under ``data/drapes_sizes/`` (resumable: finished bodies are skipped, files appear atomically):
 ``train/000.npz ...``, ``test/...``, one file per body, the same adults as the drapes of real adults
@@ -70,8 +70,11 @@ def drape_body_in_sizes(
     return arrays
 
 
-def build(out: Path, n_train: int, n_test: int, garment_ids: tuple[str, ...] = ()) -> dict:
-    """Drape every body not yet on disk (the held-out split first); returns the build record."""
+def build(
+    out: Path, n_train: int, n_test: int, garment_ids: tuple[str, ...] = (), shard: tuple[int, int] = (0, 1)
+) -> dict:
+    """Drape every body not yet on disk (the held-out split first); returns the build record. ``shard``
+    (k, n): only the bodies whose index is k modulo n, so that n processes share one directory."""
     from training.drape.population import people
 
     out = Path(out)
@@ -81,13 +84,13 @@ def build(out: Path, n_train: int, n_test: int, garment_ids: tuple[str, ...] = (
     space = CanonicalSpace.build(builder.model.vertices(np.asarray(DEFAULT_BETA)), builder.model.faces)
     charts = json.loads((models_dir() / "garments" / CHARTS_NAME).read_text())
     settings = DrapeSettings()
-    record_path = out / "build.json"
+    record_path = out / f"build-{shard[0]}.json"
     record = json.loads(record_path.read_text()) if record_path.exists() else {"seconds": 0.0, "bodies": 0}
     for split, n in (("test", n_test), ("train", n_train)):
         (out / split).mkdir(parents=True, exist_ok=True)
         for i, (person, beta, body) in enumerate(people(n, split) if n else []):
             path = out / split / f"{i:03d}.npz"
-            if path.exists():
+            if path.exists() or i % shard[1] != shard[0]:
                 continue
             t0 = time.perf_counter()
             measured = builder.build(person.request).measured
@@ -110,8 +113,11 @@ def main(argv=None) -> None:
     parser.add_argument("--test", type=int, default=8)
     parser.add_argument("--garments", default="", help="comma-separated ids (default: every bundled one)")
     parser.add_argument("--out", type=Path, default=DEFAULT_DIR)
+    parser.add_argument("--shard", default="0/1", help="K/N: this process drapes bodies K, K+N, ...")
     args = parser.parse_args(argv)
-    print(json.dumps(build(args.out, args.train, args.test, tuple(g for g in args.garments.split(",") if g))))
+    k, n = (int(v) for v in args.shard.split("/"))
+    garments = tuple(g for g in args.garments.split(",") if g)
+    print(json.dumps(build(args.out, args.train, args.test, garments, (k, n))))
 
 
 if __name__ == "__main__":

@@ -25,6 +25,7 @@ import numpy as np
 import scipy.optimize
 
 from service.geometry.mesh import face_normals
+from service.pipeline.size_model import ONE_SIZE_GRADING
 from training.drape import energy
 from training.drape.energy import BodyPlanes, RestShape
 
@@ -45,7 +46,7 @@ class DrapeSettings:
     collision_stiffness: float = 2e5  # N / m^3 (per unit area): a 1 N/m^2 pressure sinks 5 um
     margin: float = 0.003  # m kept between cloth and skin
     pin_stiffness: float = 2e4  # N / m^3 (per unit area) for waistband vertices
-    grading: float = 0.7  # share of the body's change the garment's rest shape follows (sizing)
+    grading: float = ONE_SIZE_GRADING  # share of the body's change the rest shape follows (one size)
     friction_stiffness: float = 2e3  # N / m^3 (per unit area): a vertex's own weight shears it ~1 mm
     friction_band: float = 0.02  # m: cloth starting this close to the skin sticks, fading with distance
     step_tol: float = 2e-4  # m: converged when no vertex moved more than this over a window

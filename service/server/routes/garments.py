@@ -9,6 +9,8 @@ from typing import Annotated
 from fastapi import APIRouter, Depends, HTTPException
 
 from service.pipeline.catalog import Garment, full_catalog
+from service.pipeline.sizing import SIZES_NAME, load_sizes
+from service.process.paths import models_dir
 from service.server.routes.deps import SettingsDep, TryOnDep
 from service.server.schemas import ErrorResponse, GarmentList, GarmentSummary
 from service.server.settings import Settings
@@ -45,6 +47,17 @@ CatalogDep = Annotated[dict[str, Garment], Depends(get_catalog)]
 
 
 @router.get("/garments", responses={503: {"model": ErrorResponse, "description": CATALOG_NOT_LOADED}})
-def list_garments(catalog: CatalogDep) -> GarmentList:
-    """The garment catalog."""
-    return GarmentList(garments=[GarmentSummary(**g.summary()) for g in catalog.values()])
+def list_garments(catalog: CatalogDep, settings: SettingsDep) -> GarmentList:
+    """The garment catalog, with the sizes each garment comes in."""
+    sizes = catalog_sizes(settings)
+    return GarmentList(
+        garments=[GarmentSummary(**g.summary(), sizes=sizes.get(gid, [])) for gid, g in catalog.items()]
+    )
+
+
+def catalog_sizes(settings: Settings) -> dict[str, list[str]]:
+    """Garment id -> its sizes, smallest first (``sizes.json`` beside the catalog; none: one size each)."""
+    path = (settings.catalog_dir() or models_dir() / "garments") / SIZES_NAME
+    if not path.is_file():
+        return {}
+    return {style: list(entry["girths"]) for style, entry in load_sizes(path)["styles"].items()}

@@ -8,6 +8,7 @@ from typing import Annotated
 
 from fastapi import APIRouter, Depends, Header, HTTPException, Path, Request, Response
 
+from service.pipeline.sizes import LETTERS
 from service.pipeline.tryon import GARMENT_ID, GIRTH_FIELDS
 from service.server import outfit_url
 from service.server.errors import HeaderInvalid
@@ -149,10 +150,12 @@ def _param(name: str, schema: dict, description: str, required: bool = False) ->
     return {"name": name, "in": "query", "required": required, "schema": schema, "description": description}
 
 
+ITEM = f"{GARMENT_ID}(:({'|'.join(LETTERS)}))?"
 # Parsed by ``outfit_url.parse_query`` (one model, the POST's), declared here for clients and fuzzers.
 QUERY_PARAMETERS = [
-    _param("garments", {"type": "string", "pattern": f"^{GARMENT_ID}(,{GARMENT_ID})*$"},
-           "Garment ids, inner to outer, comma-separated (the POST's `garments`).", required=True),
+    _param("garments", {"type": "string", "pattern": f"^{ITEM}(,{ITEM})*$"},
+           "Garments, inner to outer, comma-separated, each `id` or `id:SIZE` (the POST's `garments`: "
+           "`tshirt:L` is `{\"id\": \"tshirt\", \"size\": \"L\"}`).", required=True),
     _param("gender", {"type": "number", "minimum": 0, "maximum": 1}, "The POST's `body.gender`."),
     _param("height_cm", {"type": "number"}, "The POST's `body.height_cm`."),
     _param("weight_kg", {"type": "number"}, "The POST's `body.weight_kg`."),
@@ -164,6 +167,7 @@ QUERY_PARAMETERS = [
            "The POST's `options.untangler`."),
     _param("compression", {"type": "string", "enum": ["none", "quantized", "meshopt"]},
            "The POST's `options.compression`."),
+    _param("tension", {"type": "boolean"}, "The POST's `options.tension`."),
     _param("v", {"type": "string"}, "Model version the URL was made for; another (or none): served by the "
            "serving models with `Cache-Control: public, no-cache`."),
     _param("k", {"type": "string"}, "API key id of a signed URL."),

@@ -1,4 +1,4 @@
-// The try-on page: pick garments and their order, set the body (girths optional), POST /v1/outfits,
+// The try-on page: pick garments, their order and sizes, set the body (girths optional), POST /v1/outfits,
 // show the GLB and the body's measurements.
 const $ = (id) => document.getElementById(id);
 
@@ -17,6 +17,7 @@ const DEFAULT_OUTFIT = ["pants", "tshirt"];
 const GIRTHS = [["chest", "chest_cm", "chest"], ["waist", "waist_cm", "waist"], ["hip", "hip_cm", "hip"]];
 
 const layers = []; // garment ids, inner to outer
+const sizes = {}; // garment id -> the size picked ("" or absent: one size, cut to the body)
 let catalog = [];
 let rangesAsked = 0; // the latest /v1/body/ranges request: older answers are dropped
 
@@ -31,7 +32,9 @@ function renderLayers() {
   const list = $("layers");
   list.replaceChildren(...layers.map((id, i) => {
     const item = document.createElement("li");
-    item.textContent = catalog.find((g) => g.id === id).name;
+    const garment = catalog.find((g) => g.id === id);
+    item.textContent = garment.name;
+    if ((garment.sizes || []).length) item.append(sizePicker(garment));
     for (const [label, step, title] of [["↑", -1, "inner"], ["↓", 1, "outer"]]) {
       const button = document.createElement("button");
       button.type = "button";
@@ -46,6 +49,22 @@ function renderLayers() {
     }
     return item;
   }));
+}
+
+// A garment's size picker: "one size" (cut to the body, as a bare id) or one of the sizes it comes in.
+function sizePicker(garment) {
+  const select = document.createElement("select");
+  select.name = `size-${garment.id}`;
+  select.title = `size of the ${garment.name}`;
+  select.append(new Option("one size", ""), ...garment.sizes.map((s) => new Option(s, s)));
+  select.value = sizes[garment.id] || "";
+  select.onchange = () => { sizes[garment.id] = select.value; };
+  return select;
+}
+
+// The request's garments: an id, or {id, size} where a size is picked.
+function requestGarments() {
+  return layers.map((id) => (sizes[id] ? { id, size: sizes[id] } : id));
 }
 
 function toggle(id, on) {
@@ -155,6 +174,16 @@ function showGlb(url) {
   });
 }
 
+// The report's strain per garment, when the tension map was asked for.
+function tensionText(report) {
+  const tension = report.tension;
+  if (!tension) return "";
+  const rows = Object.entries(tension).map(([id, t]) =>
+    `${id} ${report.sizes?.[id] || "one size"}: ${Math.round(100 * t.stretched_share)} % of it stretched ` +
+    `over 2 %, median ${(100 * t.stretch_p50).toFixed(1)} %`);
+  return `\n${rows.join("\n")}`;
+}
+
 async function dress() {
   if (!layers.length) {
     clearView();
@@ -168,13 +197,15 @@ async function dress() {
     return status(err.message, "error");
   }
   const request = {
-    garments: layers,
+    garments: requestGarments(),
     body: { gender: Number($("gender").value), height_cm: Number($("height").value),
             weight_kg: Number($("weight").value), ...given },
+    // The tension map is written in the plain encoding only.
     options: { untangle: $("untangle").checked, include_body: $("include-body").checked,
-               compression: $("compression").value },
+               compression: $("tension").checked ? "none" : $("compression").value,
+               tension: $("tension").checked },
   };
-  const names = layers.join(" < ");
+  const names = layers.map((id) => (sizes[id] ? `${id} ${sizes[id]}` : id)).join(" < ");
   $("dress").disabled = true;
   status(`Dressing ${names}…`, "busy");
   mark("dress");
@@ -203,7 +234,7 @@ async function dress() {
     const shown = Math.round(performance.now() - t0);
     const fallback = answer.report.numerical_fallback || [];
     status(`${names}: made in ${made} ms${answer.cached ? " (cached)" : ""}, on screen in ${shown} ms` +
-           (fallback.length ? `\nnot fitted: ${fallback.join(", ")}` : ""));
+           (fallback.length ? `\nnot fitted: ${fallback.join(", ")}` : "") + tensionText(answer.report));
   } catch (err) {
     clearView();
     status(`Request failed: ${err}`, "error");
