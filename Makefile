@@ -35,6 +35,9 @@ models: $(VENV)/.installed-test
 	$(BIN)/python -m training.drape --source box --train 14 --test 8 --out data/drapes_box
 	$(BIN)/python -m training.explicit --box-data data/drapes_box
 	$(BIN)/python -m export.explicit
+	$(BIN)/python -m training.garments.grading
+	$(BIN)/python -m training.drape.sizes
+	$(BIN)/python -m training.explicit_sizes
 	$(BIN)/python -m training.untangler
 	$(BIN)/python -m export.untangler
 	$(BIN)/python -m training.fields

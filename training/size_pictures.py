@@ -1,6 +1,8 @@
 """Pictures of one style in several sizes on one body, with their tension maps (issue 56):
 ``python -m training.size_pictures [--garment tshirt] [--sizes S,M,L,XL] [--body 0,178,80]``;
-``--charts``: the chart bodies of every size instead (``docs/images/chart_bodies.png``).
+``--charts``: the chart bodies of every size instead (``docs/images/chart_bodies.png``);
+``--over tank_top,long_sleeve``: the garment in the first of ``--sizes`` over each of these, as the
+service answers it, with the tension maps (``docs/images/layers_<garment>.png``).
 
 Each size is its rest shape (``training.garments.grading``: the style's pattern on the size's chart
 body, ``models/garments/size_charts.json``). Per size, left to right: draped on the shopper's body by
@@ -66,6 +68,31 @@ def chart_picture(builder, charts: dict) -> np.ndarray:
     return grid(images, titles, columns=6)
 
 
+def layers_picture(args) -> Path:
+    """The garment in its first size over each of ``args.over``, served, plain and as tension maps."""
+    gender, height, weight = (float(x) for x in args.body.split(","))
+    engine = ModelEngine.load(models_dir(), threads=2)
+    letter = args.sizes.split(",")[0]
+    images, titles = [], []
+    for inner in args.over.split(","):
+        spec = OutfitSpec((inner, args.garment), gender, height, weight, sizes=(None, letter), tension=True)
+        result = engine.make(spec)
+        body, *garments = result.layers
+        skin = MeshLayer(body.vertices, body.faces, PALETTE["skin"])
+        plain = [skin, *(MeshLayer(g.vertices, g.faces, GARMENT_COLORS.get(g.name, PALETTE["rose"]))
+                         for g in garments)]  # fmt: skip
+        mapped = [skin, *(MeshLayer(g.vertices, g.faces, PALETTE["rose"],
+                                    face_colors=np.asarray(g.colors)[np.asarray(g.faces)].mean(axis=1))
+                          for g in garments)]  # fmt: skip
+        camera = fit_camera(plain, "front")
+        images.append(np.concatenate([render(plain, "front", 420, camera=camera),
+                                      render(mapped, "front", 420, camera=camera)], axis=1))  # fmt: skip
+        t = result.report["tension"][args.garment]
+        titles.append(f"{args.garment} {letter} over {inner}: stretch median {100 * t['stretch_p50']:.1f} %, "
+                      f"{100 * t['stretched_share']:.0f} % of it over 2 %")
+    return save_png(args.out / f"layers_{args.garment}.png", grid(images, titles, columns=2))
+
+
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--garment", default="tshirt")
@@ -73,7 +100,11 @@ def main(argv=None) -> None:
     parser.add_argument("--body", default="0,178,80", help="gender,height_cm,weight_kg")
     parser.add_argument("--out", type=Path, default=REPO_ROOT / "docs" / "images")
     parser.add_argument("--charts", action="store_true", help="the chart bodies instead (chart_bodies.png)")
+    parser.add_argument("--over", default="", help="inner garments to wear it over, one picture each")
     args = parser.parse_args(argv)
+    if args.over:
+        print(f"wrote {layers_picture(args)}")
+        return
     if args.charts:
         builder = chart_builder()
         charts = json.loads((models_dir() / "garments" / CHARTS_NAME).read_text())

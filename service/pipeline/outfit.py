@@ -98,11 +98,16 @@ def make_outfit(
     # Each garment's explicit model and body clearance on its own thread (onnxruntime and the kernels
     # release the GIL); the same meshes as one after the other.
     deltas = deltas or {}
+    # A sized garment's field is its one-size garment's (the fields take no size): its f is moved by
+    # how far the size lies further out on average (SizeModel.lift), so the untangling sees the size.
+    lifts: dict[str, float] = {}
 
     def explicit_mesh(g: str) -> np.ndarray:
         x = models.explicit[g].canonical(beta)
         if g in deltas:
-            x = models.sizes[g].canonical(x, beta, deltas[g])
+            sized = models.sizes[g].canonical(x, beta, deltas[g])
+            lifts[g] = models.sizes[g].lift(x, sized)
+            x = sized
         return models.clearance.clear_of_body(x)
 
     unshifted = list(pool("fit", FIT_THREADS).map(explicit_mesh, garment_ids))
@@ -124,7 +129,7 @@ def make_outfit(
         seconds["explicit"] += time.perf_counter() - t0
         meshes = (unshifted, explicit, lowered)
         attempt = _layered(models, garment_ids, beta, body, meshes, faces, seconds, how, passes_left,
-                           deadline)  # fmt: skip
+                           deadline, lifts)  # fmt: skip
         attempts.append(attempt)
         passes_left -= attempt.passes
         late = time.perf_counter() > deadline
@@ -231,12 +236,12 @@ class _How:
 
 def _layered(
     models, garment_ids, beta, body, meshes, faces, seconds: dict, how: _How, pass_limit: int,
-    deadline: float | None = None,
+    deadline: float | None = None, lifts: dict[str, float] | None = None,
 ) -> _Attempt:
     """The fit, the body map and the repair of one ``_let_down``'s explicit meshes: ``meshes`` is (the
     explicit meshes before any junction moved them, after, how far each moved). The time of each stage
     is added to ``seconds``; the repair runs at most ``pass_limit`` passes, none starting after
-    ``deadline`` but the first."""
+    ``deadline`` but the first; ``lifts``: how far each sized garment's f moves out (``make_outfit``)."""
     unshifted, explicit, lowered = meshes
     untangle_layers, untangler, settings = how.untangle_layers, how.untangler, how.settings
     body_field, repair, collisions = how.body_field, how.repair, how.collisions
@@ -245,7 +250,7 @@ def _layered(
     def layer_fields(k, x, gradient):
         if k == 0 and body_field == "exact":
             return models.clearance.body_field(x, gradient)
-        return models.fields(layer_ids[k], x, beta, gradient)
+        return _lifted(models.fields(layer_ids[k], x, beta, gradient), layer_ids[k], lifts)
 
     def add(key, value):
         seconds[key] = seconds.get(key, 0.0) + value
@@ -281,7 +286,8 @@ def _layered(
         # Every layer's fields at every fitted vertex, as the fit left them (None: evaluate again).
         cache = [r.values if r.ok else None for r in fits]
         anchors = [models.pairs.anchors(g) for g in garment_ids]
-        stack = Stack(faces, anchors, _segment_test(models, garment_ids), _fields_of(models, layer_ids, beta))
+        layer_fields_of = _fields_of(models, layer_ids, beta, lifts)
+        stack = Stack(faces, anchors, _segment_test(models, garment_ids), layer_fields_of)
         body_mesh = ClosestPoint.build(body, models.body.faces)
         resolved = resolve(stack, body_mesh, explicit, Fitted(fitted, cache), world, lowered, collisions,
                            pass_limit, deadline)  # fmt: skip
@@ -326,14 +332,20 @@ def _measures(models, layer_ids, body, beta, explicit, before, fitted, world, fa
     return out
 
 
-def _fields_of(models: OutfitModels, layer_ids: list[str], beta: np.ndarray) -> LayerFields:
+def _fields_of(models: OutfitModels, layer_ids: list[str], beta: np.ndarray, lifts=None) -> LayerFields:
     """The stack's ``LayerFields``: layer k's (f, h) at canonical points, on the body ``beta``."""
 
     def fields(k: int, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        v = models.fields(layer_ids[k], x, beta)
+        v = _lifted(models.fields(layer_ids[k], x, beta), layer_ids[k], lifts)
         return v.f, v.h
 
     return fields
+
+
+def _lifted(values, layer_id: str, lifts: dict[str, float] | None):
+    """``values`` (``FieldValues``) with f moved ``lifts[layer_id]`` outwards (f < 0 is inside)."""
+    lift = (lifts or {}).get(layer_id, 0.0)
+    return values._replace(f=values.f - lift) if lift else values
 
 
 def _segment_test(models: OutfitModels, garment_ids: list[str]):

@@ -97,6 +97,12 @@ class SizeModel:
             return follow
         return self.coder.decode(self.coder.encode(follow) + self.offset(beta, delta))
 
+    def lift(self, follow: np.ndarray, sized: np.ndarray) -> float:
+        """How far (m) ``sized (V, 3)`` lies further from the body than ``follow (V, 3)``, on average over
+        the vertices, along the normals of the anchors (negative: closer)."""
+        normals = self.coder.frame.astype(np.float64)[:, 2]
+        return float(np.mean(np.einsum("vx,vx->v", normals, np.asarray(sized) - np.asarray(follow))))
+
     def save(self, path: Path) -> Path:
         arrays = {"basis": self.basis, "input_shift": self.input_shift, "input_scale": self.input_scale,
                   "letters": np.array(self.letters), "run": self.run,

@@ -96,8 +96,8 @@ try {
   for (const id of garments) await page.check(`input[name=garment][value=${id}]`);
   if (!untangle) await page.uncheck("#untangle");
   summary.layers = await page.$$eval("#layers li", (items) => items.map((li) => li.firstChild.textContent));
-  for (const compression of compressions) {
-    await page.selectOption("#compression", compression);
+  // Dress with the controls as set; the viewer's load (or error) event, the status and a screenshot.
+  async function dressAndShoot(label) {
     // The viewer's next load or error event (its `loaded` stays true from the last model until then).
     await page.evaluate(() => {
       const viewer = document.querySelector("model-viewer");
@@ -114,17 +114,25 @@ try {
                                      || document.querySelector("model-viewer").modelIsVisible,
                                null, { timeout, polling: 250 });
     const event = await page.evaluate(() => window.viewerEvent);
-    const run = { compression, event, status: await page.textContent("#status") };
+    const run = { event, status: await page.textContent("#status") };
     run.src = await page.$eval("model-viewer", (v) => v.src);
     run.loaded = await page.$eval("model-viewer", (v) => v.loaded);
     await page.waitForTimeout(1500); // let the first frames and the shadow settle
-    run.screenshot = screenshot.replace(/\.png$/, "") + `-${compression}.png`;
+    run.screenshot = screenshot.replace(/\.png$/, "") + `-${label}.png`;
     await page.screenshot({ path: run.screenshot });
     const { pathname, search } = new URL(run.src, origin);
     run.glb = glbs[pathname + search] || null;
     run.measured = await page.evaluate(() => JSON.parse(document.body.dataset.measured || "null"));
-    summary.runs.push(run);
+    return run;
   }
+  for (const compression of compressions) {
+    await page.selectOption("#compression", compression);
+    summary.runs.push({ compression, ...(await dressAndShoot(compression)) });
+  }
+  // The T-shirt in S with the tension map (the plain encoding, whatever the encoding picked).
+  await page.selectOption("select[name=size-tshirt]", "S");
+  await page.check("#tension");
+  summary.tension = await dressAndShoot("tension");
 } finally {
   await context.close();
   rmSync(userDataDir, { recursive: true, force: true });

@@ -96,6 +96,12 @@ def test_page_dresses_a_body_in_every_glb_encoding(tmp_path: Path):
         red, green = 0, 1
         assert share_above(view, red, green) > 0.02, f"{c}: no T-shirt red in the 3D view"
         assert share_above(view, green, red) > 0.01, f"{c}: no shorts teal in the 3D view"
+    tension = summary["tension"]  # the T-shirt in S, coloured by its stretch
+    assert tension["event"] == "load", tension["status"]
+    assert tension["src"].startswith("/v1/outfits.glb?garments=shorts,tshirt:S&"), tension["src"]
+    assert "&tension=true" in tension["src"]
+    assert "shorts < tshirt S" in tension["status"] and "tshirt S: " in tension["status"], tension["status"]
+    assert tension["glb"]["extensionsRequired"] == [], tension["glb"]  # the plain encoding
     sizes = [r["glb"]["bytes"] for r in summary["runs"]]
     assert sizes == sorted(sizes, reverse=True), sizes
     for c in COMPRESSIONS[1:]:

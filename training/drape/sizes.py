@@ -109,8 +109,8 @@ def main(argv=None) -> None:
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
-    parser.add_argument("--train", type=int, default=28)
-    parser.add_argument("--test", type=int, default=8)
+    parser.add_argument("--train", type=int, default=40)
+    parser.add_argument("--test", type=int, default=6)
     parser.add_argument("--garments", default="", help="comma-separated ids (default: every bundled one)")
     parser.add_argument("--out", type=Path, default=DEFAULT_DIR)
     parser.add_argument("--shard", default="0/1", help="K/N: this process drapes bodies K, K+N, ...")
