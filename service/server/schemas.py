@@ -271,8 +271,11 @@ class OutfitCreated(BaseModel):
         "repair; `crossing_pairs` counts what is left), `numerical_fallback` (garments served unfitted "
         "after a numerical fault), `attempts` (how many times the outfit was made: more than 1 where a "
         "garment let down around an inner one's lower junction came out crossing and was made again "
-        "with more room), `seconds` per pipeline stage, and `body` (a `BodyReport`: the body as built, "
-        "measured on its mesh, and which girths were predicted).",
+        "with more room), `seconds` per pipeline stage, `sizes` (each garment's size, null for the "
+        "one-size garment), `tension` with `options.tension` (per garment `stretch_p50`, `stretch_p95`, "
+        "`stretch_max` and `stretched_share`: its fabric's stretch against its cut, docs/fit.md), and "
+        "`body` (a `BodyReport`: the body as built, measured on its mesh, and which girths were "
+        "predicted).",
         json_schema_extra={"properties": {"body": {"$ref": "#/components/schemas/BodyReport"}}},
     )
 
